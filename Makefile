@@ -1,0 +1,29 @@
+# forearm_dynamics: `make demo` and `make test` set everything up themselves.
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PYTHON ?= python3
+# DDS stays on this machine; each target has its own domain.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export HOME ?= /tmp
+EXTRAS ?= test,reference,plots
+
+.PHONY: setup test demo lint bench reference reproduce clean
+
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: setup.py setup.cfg .ci/requirements.lock
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --disable-pip-version-check --upgrade "pip==25.3"
+	$(PY) -m pip install -q --disable-pip-version-check -c .ci/requirements.lock -e ".[$(EXTRAS)]"
+	@touch $@
+
+test: setup
+	$(VENV)/bin/ruff check .
+	ROS_DOMAIN_ID=71 $(PY) -m pytest -q test
+
+lint: setup
+	$(VENV)/bin/ruff check .
+
+clean:
+	rm -rf $(VENV) build install log .pytest_cache

@@ -1,0 +1,48 @@
+"""ament_python package; also installs with pip into a plain venv from PyPI alone."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "forearm_dynamics"
+
+# Executables: console scripts (pip) and lib/forearm_dynamics/<exe> (colcon, `ros2 run`).
+EXECUTABLES = {
+    "export_urdf": "forearm_dynamics.cli.export_urdf:main",
+}
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+    ],
+    package_data={PACKAGE: ["data/*"]},
+    python_requires=">=3.10",
+    install_requires=[
+        "numpy>=1.26",
+        "pin>=3.0",
+        "pyyaml>=6",
+        "scipy>=1.11",
+        "mcap>=1.2",
+        "ros-jazzy-rclpy",
+        "ros-jazzy-rmw-fastrtps-cpp",
+        "ros-jazzy-sensor-msgs",
+        "ros-jazzy-std-msgs",
+        "ros-jazzy-diagnostic-msgs",
+    ],
+    extras_require={
+        "plots": ["matplotlib>=3.7"],
+        "reference": ["opensim==4.6"],
+        "test": ["pytest>=8", "rosbags>=0.10", "ruff>=0.5", "colcon-common-extensions", "colcon-ros"],
+    },
+    zip_safe=True,
+    maintainer="forearm_dynamics developers",
+    maintainer_email="dev@forearm-dynamics.invalid",
+    description="Real-time hand-and-forearm inverse dynamics for prosthesis controllers",
+    license="BSD-3-Clause",
+    entry_points={"console_scripts": [f"{k} = {v}" for k, v in EXECUTABLES.items()]},
+)
