@@ -9,6 +9,14 @@ PACKAGE = "forearm_dynamics"
 # Executables: console scripts (pip) and lib/forearm_dynamics/<exe> (colcon, `ros2 run`).
 EXECUTABLES = {
     "export_urdf": "forearm_dynamics.cli.export_urdf:main",
+    "make_reference": "forearm_dynamics.cli.make_reference:main",
+    "reproduce_paper": "forearm_dynamics.cli.reproduce_paper:main",
+    "check_bag": "forearm_dynamics.cli.check_bag:main",
+    "demo": "forearm_dynamics.cli.demo:main",
+    "torque_node": "forearm_dynamics.nodes.torque_node:main",
+    "trajectory_publisher": "forearm_dynamics.nodes.trajectory_publisher:main",
+    "bag_recorder": "forearm_dynamics.nodes.bag_recorder:main",
+    "null_echo_node": "forearm_dynamics.nodes.null_echo_node:main",
 }
 
 setup(
