@@ -1,0 +1,36 @@
+"""Zero-phase Butterworth low-pass, as the paper filtered its torques (6 Hz)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import yaml
+from scipy.signal import butter, sosfiltfilt
+
+from ..paths import config_file
+
+
+@lru_cache(maxsize=1)
+def analysis_config() -> dict:
+    with open(config_file("analysis.yaml"), encoding="utf-8") as fh:
+        return yaml.safe_load(fh)
+
+
+@lru_cache(maxsize=16)
+def _sos(cutoff_hz: float, order: int, fs: float) -> np.ndarray:
+    return butter(order, cutoff_hz, btype="low", fs=fs, output="sos")
+
+
+def lowpass(x: np.ndarray, fs: float, cutoff_hz: float | None = None, order: int | None = None,
+            axis: int = 0) -> np.ndarray:
+    """Forward-backward Butterworth along `axis`; pads with the edge value (the holds are flat)."""
+    cfg = analysis_config()["filter"]
+    cutoff_hz = float(cfg["cutoff_hz"] if cutoff_hz is None else cutoff_hz)
+    order = int(cfg["order"] if order is None else order)
+    if not 0 < cutoff_hz < fs / 2:
+        raise ValueError(f"cutoff {cutoff_hz} Hz must be in (0, fs/2 = {fs / 2}) Hz")
+    x = np.asarray(x, dtype=float)
+    n = x.shape[axis]
+    return sosfiltfilt(_sos(cutoff_hz, order, float(fs)), x, axis=axis, padtype="constant",
+                       padlen=min(n - 1, 3 * (2 * len(_sos(cutoff_hz, order, float(fs))) + 1)))
