@@ -15,13 +15,13 @@ def _v(x) -> str:
 def _link(link: Link) -> str:
     if link.mass <= 0.0:
         return f'  <link name="{link.name}"/>'
-    i = link.inertia
+    i = np.asarray(link.inertia, dtype=float).tolist()  # plain floats: repr round-trips
     return (
         f'  <link name="{link.name}">\n    <inertial>\n'
         f'      <origin xyz="{_v(link.com)}" rpy="0 0 0"/>\n'
         f'      <mass value="{float(link.mass)!r}"/>\n'
-        f'      <inertia ixx="{i[0, 0]!r}" ixy="{i[0, 1]!r}" ixz="{i[0, 2]!r}" '
-        f'iyy="{i[1, 1]!r}" iyz="{i[1, 2]!r}" izz="{i[2, 2]!r}"/>\n'
+        f'      <inertia ixx="{i[0][0]!r}" ixy="{i[0][1]!r}" ixz="{i[0][2]!r}" '
+        f'iyy="{i[1][1]!r}" iyz="{i[1][2]!r}" izz="{i[2][2]!r}"/>\n'
         "    </inertial>\n  </link>"
     )
 
@@ -45,7 +45,7 @@ def tree_to_urdf(tree: KinematicTree) -> str:
             f'    <parent link="{j.parent}"/>\n    <child link="{j.child}"/>\n'
             f'    <origin xyz="{_v(j.origin)}" rpy="0 0 0"/>\n'
             f'    <axis xyz="{_v(j.axis)}"/>\n'
-            f'    <limit lower="{j.lower!r}" upper="{j.upper!r}" effort="1000" velocity="100"/>\n'
+            f'    <limit lower="{float(j.lower)!r}" upper="{float(j.upper)!r}" effort="1000" velocity="100"/>\n'
             "  </joint>"
         )
     parts.append("</robot>\n")
