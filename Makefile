@@ -27,3 +27,6 @@ lint: setup
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache
+
+reference: setup
+	$(VENV)/bin/make_reference
