@@ -30,3 +30,6 @@ clean:
 
 reference: setup
 	$(VENV)/bin/make_reference
+
+reproduce: setup
+	$(VENV)/bin/reproduce_paper --out out/paper

@@ -86,13 +86,16 @@ def simplified_forearm(
     """Elbow + pro/sup over a (possibly split) cylinder. split = 0 is the solid model.
 
     The pro/sup axis runs from the elbow end to the wrist end of the cylinder, each end moved
-    by its (anterior, lateral) offset; it points proximally so positive = pronation.
+    by its (anterior, lateral) offset in the end's cross-section; it points proximally so
+    positive = pronation.
     """
     cyl = forearm_cylinder(desc, size)
     a = desc.anatomical
     rng = desc.ranges
-    p0 = offset_proximal[0] * cyl.anterior + offset_proximal[1] * cyl.lateral
-    p1 = cyl.wrist + offset_distal[0] * cyl.anterior + offset_distal[1] * cyl.lateral
+    # Offsets are given at the 50th percentile and scale like every forearm length.
+    prox, dist = np.asarray(offset_proximal) * size.forearm, np.asarray(offset_distal) * size.forearm
+    p0 = prox[0] * cyl.anterior + prox[1] * cyl.lateral
+    p1 = cyl.wrist + dist[0] * cyl.anterior + dist[1] * cyl.lateral
     axis = (p0 - p1) / np.linalg.norm(p0 - p1)
     split_point = split * cyl.wrist
     # Pro/sup joint origin: the point of the axis nearest the split point.
@@ -150,11 +153,14 @@ def build_tree(
     elif kind in ("solid", "segmented"):
         if kind == "solid" and split not in (None, 0, 0.0):
             raise ValueError("the solid model has no split (it is the segmented model at split=0)")
-        default_split = 0.0 if kind == "solid" else s.split
+        # The solid model is the paper's: pro/sup about the cylinder's own axis, unless told.
+        zero = np.zeros(2)
+        defaults = (0.0, zero, zero) if kind == "solid" else (
+            s.split, s.axis_offset_proximal, s.axis_offset_distal)
         sp, prox, dist = _validate_simplified(
-            default_split if split is None else split,
-            s.axis_offset_proximal if axis_offset_proximal is None else axis_offset_proximal,
-            s.axis_offset_distal if axis_offset_distal is None else axis_offset_distal,
+            defaults[0] if split is None else split,
+            defaults[1] if axis_offset_proximal is None else axis_offset_proximal,
+            defaults[2] if axis_offset_distal is None else axis_offset_distal,
         )
         links, joints, parent, wrist = simplified_forearm(desc, size, sp, prox, dist)
     else:

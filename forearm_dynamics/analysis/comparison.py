@@ -1,0 +1,57 @@
+"""The paper's comparison: each model's filtered torques against the anatomical reference."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..dynamics import ArmModel
+from ..movements import movement_library
+from ..reference import ReferenceTorques
+from .errors import ErrorSet, movement_errors
+from .filtering import lowpass
+
+
+@dataclass(frozen=True)
+class Trials:
+    """Kinematics of the 65 movements sampled once, reused by every model evaluation."""
+
+    rate_hz: float
+    movement_ids: tuple[int, ...]
+    q: np.ndarray  # (M*N, 20) all movements stacked
+    qd: np.ndarray
+    qdd: np.ndarray
+    n: int  # samples per movement
+
+    @classmethod
+    def sample(cls, rate_hz: float = 1000.0, movement_ids=None) -> Trials:
+        lib = movement_library()
+        ids = tuple(movement_ids or (m.id for m in lib))
+        parts = [lib[i - 1].evaluate(lib[i - 1].sample_times(rate_hz)) for i in ids]
+        n = parts[0][0].shape[0]
+        q, qd, qdd = (np.concatenate([p[k] for p in parts]) for k in range(3))
+        return cls(rate_hz, ids, q, qd, qdd, n)
+
+    def split(self, stacked: np.ndarray) -> np.ndarray:
+        return stacked.reshape(len(self.movement_ids), self.n, -1)
+
+
+def filtered_torques(model: ArmModel, trials: Trials) -> np.ndarray:
+    """(M, N, 20) torques low-pass filtered per movement."""
+    tau = trials.split(model.inverse_dynamics(trials.q, trials.qd, trials.qdd))
+    return lowpass(tau, trials.rate_hz, axis=1)
+
+
+def reference_filtered(ref: ReferenceTorques, trials: Trials, body_size: int) -> np.ndarray:
+    step = ref.rate_hz / trials.rate_hz
+    if abs(step - round(step)) > 1e-9:
+        raise ValueError(f"trials at {trials.rate_hz} Hz cannot be taken from {ref.rate_hz} Hz data")
+    step = round(step)
+    raw = np.stack([ref.torques(mid, body_size)[::step] for mid in trials.movement_ids])
+    return lowpass(raw, trials.rate_hz, axis=1)
+
+
+def compare(model: ArmModel, reference: np.ndarray, trials: Trials) -> ErrorSet:
+    test = filtered_torques(model, trials)
+    return movement_errors(list(test), list(reference))
