@@ -67,13 +67,13 @@ def tables_markdown(results: dict) -> str:
     models, sizes = results["models"], results["body_sizes"]
     lines = ["# forearm_dynamics: the paper's comparison, reproduced", "",
              f"Machine: {results['machine']}. Command: `{results['command']}`.", "",
-             "Errors of each simplified model against the anatomical OpenSim reference, torques "
+             ("Errors of each simplified model against the anatomical OpenSim reference, torques "
              f"low-pass filtered at {results['filter']['cutoff_hz']} Hz (zero-phase Butterworth, "
              f"order {results['filter']['order']} per pass). Cells: mean [interquartile range] "
-             "≤max over movements (and DOFs of the group), in %.", ""]
+             "≤max over movements (and DOFs of the group), in %."), ""]
     for metric, title in (("nrmse", "NRMSE, normalised per movement (the paper's metric)"),
-                          ("nrmse_global", "NRMSE, normalised by the DOF's peak-to-peak over all "
-                                           "65 movements")):
+                          ("nrmse_global", ("NRMSE, normalised by the DOF's peak-to-peak over all "
+                                           "65 movements"))):
         lines += [f"## {title}", "", "| body size | group | solid | segmented |", "|---|---|---|---|"]
         for size in sizes:
             for group in DOF_GROUPS:
@@ -87,12 +87,12 @@ def tables_markdown(results: dict) -> str:
         lines.append(f"| {group} | {s[0]['mean']:.2e} | {s[0]['max']:.2e} | "
                      f"{s[1]['mean']:.2e} | {s[1]['max']:.2e} |")
     left = {f"{k} {s}": models[k][s]["left_out"] for k in models for s in sizes}
-    lines += ["", f"Per-movement NRMSE left out (reference peak-to-peak < "
-              f"{results['ptp_floor_nm']} N·m): {left}", ""]
+    lines += ["", (f"Per-movement NRMSE left out (reference peak-to-peak < "
+              f"{results['ptp_floor_nm']} N·m): {left}"), ""]
     pl = results["placement"]
     lines += ["## Joint placement (50th percentile)", "", pl["objective"], "",
-              "| variant | split | axis offset proximal (mm) | axis offset distal (mm) | objective | "
-              "pro/sup NRMSE mean (per movement) | elbow NRMSE mean (global) |",
+              ("| variant | split | axis offset proximal (mm) | axis offset distal (mm) | objective | "
+              "pro/sup NRMSE mean (per movement) | elbow NRMSE mean (global) |"),
               "|---|---|---|---|---|---|---|"]
     for v in pl["variants"]:
         p = v["placement"]
@@ -101,8 +101,8 @@ def tables_markdown(results: dict) -> str:
         lines.append(f"| {v['label']} | {p['split']:.3f} | {mm[0]} | {mm[1]} | "
                      f"{v['objective']:.4f} | {100 * v['prosup_nrmse_mean']:.2f} % | "
                      f"{100 * v['elbow_nrmse_global_mean']:.2f} % |")
-    lines += ["", "Does the 50th-percentile optimum hold at other sizes? (objective with the "
-              "50th optimum vs re-optimised at that size)", "",
+    lines += ["", ("Does the 50th-percentile optimum hold at other sizes? (objective with the "
+              "50th optimum vs re-optimised at that size)"), "",
               "| body size | objective at 50th optimum | re-optimised | re-optimised split |",
               "|---|---|---|---|"]
     for c in pl["body_size_check"]:

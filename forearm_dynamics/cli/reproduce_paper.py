@@ -51,7 +51,7 @@ def machine() -> str:
 def placement_study(ref, bar: Progress) -> tuple[dict, Placement]:
     trials = Trials.sample(OPT_RATE_HZ)
     r50 = reference_filtered(ref, trials, 50)
-    tick = lambda: bar.step("placement search", 0)  # noqa: E731 - keeps the bar alive
+    tick = lambda: bar.step("placement search", 0)
     variants = []
 
     def add(label, placement, obj):
