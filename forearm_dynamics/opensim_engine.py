@@ -27,6 +27,7 @@ def _osim() -> Any:
         raise ImportError(
             "the OpenSim reference needs the optional 'opensim' package: pip install '.[reference]'"
         ) from exc
+    opensim.Logger.removeFileSink()  # no opensim.log in the user's working directory
     return opensim
 
 
