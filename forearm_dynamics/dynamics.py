@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,7 @@ class ArmModel:
         self.nv = len(self.joint_names)
         self.model = pinocchio_model(tree)
         self.data = self.model.createData()
+        self._one = (self.nv,)
 
     def __repr__(self) -> str:
         return f"ArmModel(kind={self.kind!r}, body_size={self.body_size.label!r}, nv={self.nv})"
@@ -57,17 +59,19 @@ class ArmModel:
     def inverse_dynamics(self, q, qd, qdd) -> np.ndarray:
         """Joint torques (N·m) for (20,) inputs, or (N, 20) inputs -> (N, 20)."""
         q = np.asarray(q, dtype=np.float64)
-        if q.shape == (self.nv,):
-            qd = np.asarray(qd, dtype=np.float64)
-            qdd = np.asarray(qdd, dtype=np.float64)
+        if q.shape != self._one:
+            return self.inverse_dynamics_batch(q, qd, qdd)
+        try:  # fast path: float64 arrays of the right size go straight to Pinocchio
+            tau = pin.rnea(self.model, self.data, q, qd, qdd)
+        except Exception:  # noqa: BLE001 - lists, ints or wrong sizes: convert and explain
+            qd, qdd = np.asarray(qd, dtype=np.float64), np.asarray(qdd, dtype=np.float64)
             if qd.shape != q.shape or qdd.shape != q.shape:
                 self._raise_shape(q, qd, qdd)
             tau = pin.rnea(self.model, self.data, q, qd, qdd)
-            # NaN/inf in any input propagates into tau: one cheap check on the output.
-            if not np.isfinite(tau.sum()):
-                self._raise_nonfinite(q, qd, qdd)
-            return tau.copy()
-        return self.inverse_dynamics_batch(q, qd, qdd)
+        # NaN/inf in any input propagates into tau: one cheap check on the output.
+        if not math.isfinite(tau.dot(tau)):
+            self._raise_nonfinite(q, qd, qdd)
+        return tau.copy()
 
     def inverse_dynamics_batch(self, q, qd, qdd) -> np.ndarray:
         q, qd, qdd = (np.ascontiguousarray(x, dtype=np.float64) for x in (q, qd, qdd))
@@ -93,7 +97,9 @@ class ArmModel:
         for name, x in (("q", q), ("qd", qd), ("qdd", qdd)):
             cols = np.flatnonzero(~np.isfinite(np.atleast_2d(x)).all(axis=0))
             bad += [f"{name}[{self.joint_names[c]}]" for c in cols]
-        raise ValueError(f"inverse_dynamics got NaN or inf in {', '.join(bad) or 'the inputs'}")
+        if not bad:
+            raise ValueError("inverse_dynamics: the torques overflow (inputs far out of range)")
+        raise ValueError(f"inverse_dynamics got NaN or inf in {', '.join(bad)}")
 
     # -- other views --------------------------------------------------------------------
     def to_urdf(self) -> str:
