@@ -18,10 +18,10 @@ def config_dir() -> Path:
         candidates.append(Path(os.environ["FOREARM_DYNAMICS_CONFIG"]))
     here = Path(__file__).resolve().parent
     candidates.append(here.parent / "config")  # source checkout / editable install
-    candidates.append(Path(sys.prefix) / "share" / PACKAGE / "config")  # pip install
-    # colcon: install/<pkg>/lib/pythonX.Y/site-packages/<pkg> -> install/<pkg>/share/<pkg>
+    # colcon or pip: <prefix>/lib/pythonX.Y/site-packages/<pkg> -> <prefix>/share/<pkg>
     if len(here.parents) > 3:
         candidates.append(here.parents[3] / "share" / PACKAGE / "config")
+    candidates.append(Path(sys.prefix) / "share" / PACKAGE / "config")  # pip, other layouts
     for path in candidates:
         if (path / "model.yaml").is_file():
             return path

@@ -1,0 +1,64 @@
+"""`colcon build` (colcon from PyPI) installs every executable where `ros2 run` looks."""
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+VENV_BIN = Path(sys.executable).parent
+
+
+def _executables() -> list[str]:
+    text = (REPO / "setup.py").read_text()
+    block = text[text.index("EXECUTABLES = {"):text.index("}", text.index("EXECUTABLES = {"))]
+    return [line.split('"')[1] for line in block.splitlines() if line.strip().startswith('"')]
+
+
+@pytest.fixture(scope="module")
+def install(tmp_path_factory):
+    if shutil.which("colcon", path=str(VENV_BIN)) is None:
+        pytest.fail("colcon is not installed in the venv (make setup installs it)")
+    ws = tmp_path_factory.mktemp("ws")
+    files = subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True,
+                           check=True).stdout.split()
+    for f in files:
+        (ws / "src" / "forearm_dynamics" / f).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(REPO / f, ws / "src" / "forearm_dynamics" / f)
+    env = {**os.environ, "PATH": f"{VENV_BIN}:{os.environ.get('PATH', '')}"}
+    r = subprocess.run([str(VENV_BIN / "colcon"), "build", "--base-paths", "src"], cwd=ws, env=env,
+                       capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    return ws / "install" / "forearm_dynamics"
+
+
+def test_every_executable_under_lib(install):
+    exes = _executables()
+    assert len(exes) >= 8
+    for exe in exes:
+        path = install / "lib" / "forearm_dynamics" / exe
+        assert path.is_file() and os.access(path, os.X_OK), exe
+    assert (install / "share" / "ament_index" / "resource_index" / "packages" / "forearm_dynamics").is_file()
+
+
+def test_installed_executable_runs_from_the_install_tree(install, tmp_path):
+    """The installed copy finds its config and data in share/ and site-packages, not the repo."""
+    site = next(install.glob("lib/python*/site-packages"))
+    env = {k: v for k, v in os.environ.items() if k != "FOREARM_DYNAMICS_CONFIG"}
+    env["PYTHONPATH"] = str(site)
+    out = tmp_path / "arm.urdf"
+    code = ("import sys, forearm_dynamics, forearm_dynamics.paths as p; "
+            f"assert str(forearm_dynamics.__file__).startswith({str(site)!r}), forearm_dynamics.__file__; "
+            "print(p.config_dir())")
+    r = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True,
+                       text=True, timeout=60, check=False)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == str(install / "share" / "forearm_dynamics" / "config")
+    r = subprocess.run([str(install / "lib" / "forearm_dynamics" / "export_urdf"), "--model", "solid",
+                        "-o", str(out)], env=env, cwd=tmp_path, capture_output=True, text=True,
+                       timeout=60, check=False)
+    assert r.returncode == 0, r.stderr
+    assert "<robot" in out.read_text()
