@@ -1,0 +1,317 @@
+"""What check_bag measures in a recorded run: pipeline error, model error, delivery.
+
+Pipeline error (is the node computing what its model says?): recorded effort vs the SAME
+model's inverse dynamics at the exact analytic state of each recorded stamp,
+movement.evaluate(stamp - t0). Not filtered: both series are sampled at the same stamps,
+and a sample-level error (late or wrong acceleration estimate, a stale sample) is what a
+controller downstream receives; a 6 Hz filter would hide it. NRMSE per DOF per movement
+= RMSE / peak-to-peak of the exact torques of that DOF in that movement; DOFs whose
+peak-to-peak is under config/analysis.yaml ptp_floor_nm are left out and counted.
+
+Model error (how far is the shipped model from the gold standard?): recorded effort,
+linearly resampled to the reference's uniform grid (k / rate_hz from t0), vs the OpenSim
+reference torques, both low-passed at 6 Hz as in the paper. NRMSE per DOF per movement
+(paper normalisation) and, for the gate, per DOF group over the bag (see check.yaml).
+
+Delivery: joint_states without a joint_torques of the same header stamp are lost; the
+one-way latency is the joint_torques' log (receive) time minus that stamp.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..analysis.errors import rmse
+from ..analysis.filtering import analysis_config, lowpass
+from ..description import DOF_GROUPS
+from ..movements import get_movement
+from ..paths import config_file
+from ..reference import ReferenceTorques
+from .decode import JointSeries, Marker, Recording
+from .model_config import ModelChoice
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """config/check.yaml: exceeding any of these makes check_bag exit 1."""
+
+    pipeline_nrmse_max: float = 0.02
+    state_max_abs_rad: float = 1e-6
+    loss_max: int = 0
+    latency_p99_ms_max: float = 1.0
+    model_group_median_nrmse_max: float = 0.10
+    model_rel_floor: float = 0.05
+    model_min_coverage: float = 0.9
+    tail_grace_s: float = 0.1
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> Thresholds:
+        path = Path(path) if path is not None else config_file("check.yaml")
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh) or {}
+        if not isinstance(data, dict):
+            raise ValueError(f"{path}: expected a mapping of thresholds")  # noqa: TRY004 - one-line config error
+        known = {f.name: f.type for f in fields(cls)}
+        unknown = sorted(set(data) - set(known))
+        if unknown:
+            raise ValueError(f"{path}: unknown threshold(s) {unknown}; known: {sorted(known)}")
+        return cls(**{k: (int(v) if k == "loss_max" else float(v)) for k, v in data.items()})
+
+
+@dataclass
+class MovementResult:
+    index: int  # order in the bag
+    id: int
+    name: str
+    elbow: str
+    t0_ns: int
+    window_ns: int  # duration (or up to the next marker): samples have t0 <= stamp < t0 + window
+    samples: int
+    expected: int  # announced by the marker, else duration x the stream's median stamp rate
+    pipeline_nrmse: np.ndarray  # (J,) NaN where left out
+    pipeline_left_out: int
+    model_nrmse: np.ndarray | None = None  # (J,) per-movement normalisation (paper)
+    model_note: str = ""
+    state_error: float = float("nan")  # max |joint_states position - analytic q|, rad
+    state_dof: str = ""
+
+    def worst(self, values: np.ndarray | None, names: tuple[str, ...]) -> tuple[float, str]:
+        if values is None or not np.isfinite(values).any():
+            return float("nan"), ""
+        j = int(np.nanargmax(values))
+        return float(values[j]), names[j]
+
+
+@dataclass
+class Delivery:
+    joint_states: int = 0
+    joint_torques: int = 0
+    considered: int = 0  # joint_states old enough to have been answered before the end
+    lost: int = 0
+    loss_pct: float = float("nan")
+    unmatched_torques: int = 0
+    latency_ms: dict[str, float] = field(default_factory=dict)
+    rate_hz: dict[str, float] = field(default_factory=dict)
+    max_gap_ms: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class CheckReport:
+    model: ModelChoice
+    joint_names: tuple[str, ...]
+    movements: list[MovementResult]
+    model_groups: dict[str, dict[str, float]]
+    delivery: Delivery
+    warnings: list[str]
+    failures: list[str] = field(default_factory=list)
+
+
+def _rate_and_gap(log_ns: np.ndarray) -> tuple[float, float]:
+    if len(log_ns) < 2:
+        return float("nan"), float("nan")
+    t = np.sort(log_ns)
+    return (len(t) - 1) / ((t[-1] - t[0]) / 1e9), float(np.diff(t).max() / 1e6)
+
+
+def delivery(states: JointSeries | None, torques: JointSeries, grace_s: float) -> Delivery:
+    d = Delivery(joint_torques=len(torques))
+    rate, gap = _rate_and_gap(torques.log_ns)
+    d.rate_hz["joint_torques"], d.max_gap_ms["joint_torques"] = rate, gap
+    answered = torques.stamp_ns, torques.log_ns
+    if states is not None and len(states):
+        d.joint_states = len(states)
+        d.rate_hz["joint_states"], d.max_gap_ms["joint_states"] = _rate_and_gap(states.log_ns)
+        end = max(states.log_ns.max(), torques.log_ns.max() if len(torques) else 0)
+        considered = states.stamp_ns[states.log_ns <= end - round(grace_s * 1e9)]
+        d.considered = len(considered)
+        d.lost = int((~np.isin(considered, torques.stamp_ns)).sum())
+        d.loss_pct = 100.0 * d.lost / d.considered if d.considered else float("nan")
+        matched = np.isin(torques.stamp_ns, states.stamp_ns)
+        d.unmatched_torques = int((~matched).sum())
+        answered = torques.stamp_ns[matched], torques.log_ns[matched]
+    if len(answered[0]):
+        lat = (answered[1] - answered[0]) / 1e6
+        p50, p99 = np.percentile(lat, [50, 99])
+        d.latency_ms = {"p50": float(p50), "p99": float(p99), "max": float(lat.max())}
+    return d
+
+
+def _window(torques: JointSeries, t0_ns: int, window_ns: int) -> np.ndarray:
+    return (torques.stamp_ns >= t0_ns) & (torques.stamp_ns < t0_ns + window_ns)
+
+
+def _pipeline(arm, marker: Marker, next_t0: int | None, torques: JointSeries, floor: float,
+              index: int) -> MovementResult:
+    mv = get_movement(marker.id)
+    window = round(mv.duration * 1e9)
+    if next_t0 is not None:  # back-to-back movements: a sample belongs to one only
+        window = min(window, next_t0 - marker.t0_ns)
+    sel = _window(torques, marker.t0_ns, window)
+    if marker.samples is not None:
+        expected = marker.samples
+    else:
+        steps = np.diff(np.sort(torques.stamp_ns[sel]))
+        steps = steps[steps > 0]
+        expected = int(mv.duration * 1e9 / np.median(steps)) if len(steps) else 0
+    nv = len(arm.joint_names)
+    res = MovementResult(index, mv.id, marker.name or mv.name, marker.elbow or mv.elbow, marker.t0_ns,
+                         window, int(sel.sum()), expected, np.full(nv, np.nan), 0)
+    if res.samples == 0:
+        return res
+    t = (torques.stamp_ns[sel] - marker.t0_ns) / 1e9
+    exact = arm.inverse_dynamics(*mv.evaluate(t))
+    err = rmse(torques.effort[sel], exact)
+    ptp = np.ptp(exact, axis=0)
+    keep = ptp >= floor
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # a NaN effort (missing joint) must fail, not vanish: report it as infinite error
+        res.pipeline_nrmse = np.where(keep, np.where(np.isfinite(err), err / ptp, np.inf), np.nan)
+    res.pipeline_left_out = int((~keep).sum())
+    return res
+
+
+def _state_error(res: MovementResult, states: JointSeries, names: tuple[str, ...]) -> None:
+    """Are the published positions the movement's analytic ones at their stamps?
+
+    Separates a wrong publisher (bad samples in) from a wrong torque node (bad torques out).
+    """
+    sel = _window(states, res.t0_ns, res.window_ns)
+    if not sel.any() or states.position is None:
+        return
+    q, _qd, _qdd = get_movement(res.id).evaluate((states.stamp_ns[sel] - res.t0_ns) / 1e9)
+    err = np.abs(states.position[sel] - q).max(axis=0)
+    err = np.where(np.isnan(err), np.inf, err)  # a missing joint is as wrong as it gets
+    j = int(np.argmax(err))
+    res.state_error, res.state_dof = float(err[j]), names[j]
+
+
+def _resampled(res: MovementResult, torques: JointSeries, ref: ReferenceTorques, pct: int,
+               names: tuple[str, ...], min_coverage: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(recorded, reference) on the reference grid, both filtered; None (with a note) if not."""
+    try:
+        r = ref.torques(res.id, pct)
+    except ValueError as exc:
+        res.model_note = str(exc)
+        return None
+    cols = [ref.joint_names.index(n) for n in names]
+    r = np.asarray(r, float)[:, cols]
+    if res.samples < max(2.0, min_coverage * res.expected):
+        res.model_note = f"only {res.samples} of {res.expected} samples"
+        return None
+    sel = _window(torques, res.t0_ns, res.window_ns)
+    t = (torques.stamp_ns[sel] - res.t0_ns) / 1e9
+    order = np.argsort(t)
+    t, rec = t[order], torques.effort[sel][order]
+    if not np.isfinite(rec).all():
+        res.model_note = "recorded effort has NaN"
+        return None
+    grid = np.arange(r.shape[0]) / ref.rate_hz
+    on_grid = np.column_stack([np.interp(grid, t, rec[:, j]) for j in range(rec.shape[1])])
+    return lowpass(on_grid, ref.rate_hz), lowpass(r, ref.rate_hz)
+
+
+def _library_scale(ref: ReferenceTorques, pct: int, cols: list[int]) -> np.ndarray:
+    """Per DOF: the largest filtered peak-to-peak over every movement of the reference."""
+    torques = np.asarray(ref.torques_all[ref.body_sizes.index(pct)], float)[..., cols]
+    return np.ptp(lowpass(torques, ref.rate_hz, axis=1), axis=1).max(axis=0)
+
+
+def _model_error(results: list[MovementResult], torques: JointSeries, ref: ReferenceTorques,
+                 pct: int, names: tuple[str, ...], th: Thresholds) -> dict[str, dict[str, float]]:
+    pairs = {res.index: p for res in results
+             if (p := _resampled(res, torques, ref, pct, names, th.model_min_coverage)) is not None}
+    if not pairs:
+        return {}
+    scale = _library_scale(ref, pct, [ref.joint_names.index(n) for n in names])
+    lib_rows = []
+    for res in results:
+        if res.index not in pairs:
+            continue
+        test, gold = pairs[res.index]
+        err = rmse(test, gold)
+        ptp = np.ptp(gold, axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # paper normalisation, only where the DOF really moves in this movement
+            res.model_nrmse = np.where(ptp >= th.model_rel_floor * scale, err / ptp, np.nan)
+            lib_rows.append(np.where(scale > 0, err / scale, np.nan))
+    # Gate: normalised by each DOF's largest peak-to-peak over the whole reference library,
+    # so the number does not depend on which movements the bag happens to hold.
+    lib = np.array(lib_rows)
+    groups = {}
+    for group, dofs in DOF_GROUPS.items():
+        idx = [names.index(d) for d in dofs if d in names]
+        vals = lib[:, idx][np.isfinite(lib[:, idx])]
+        groups[group] = {
+            "n": int(vals.size),
+            "median": float(np.median(vals)) if vals.size else float("nan"),
+            "mean": float(vals.mean()) if vals.size else float("nan"),
+            "max": float(vals.max()) if vals.size else float("nan"),
+        }
+    return groups
+
+
+def analyse(rec: Recording, choice: ModelChoice, ref: ReferenceTorques | None, th: Thresholds,
+            ref_problem: str | None = None) -> CheckReport:
+    """All three measures and the threshold verdicts (report.failures)."""
+    arm, names = choice.arm, choice.arm.joint_names
+    warnings = list(rec.warnings) + list(choice.warnings)
+    floor = float(analysis_config()["ptp_floor_nm"])
+    torques = rec.joint_torques
+    results = []
+    for k, marker in enumerate(rec.markers):
+        next_t0 = rec.markers[k + 1].t0_ns if k + 1 < len(rec.markers) else None
+        try:
+            results.append(_pipeline(arm, marker, next_t0, torques, floor, k))
+        except ValueError as exc:
+            warnings.append(f"movement marker {marker.id} ignored: {exc}")
+    for res in results:
+        if res.samples == 0:
+            warnings.append(f"movement {res.id} at index {res.index}: no joint_torques in its window")
+        if rec.joint_states is not None:
+            _state_error(res, rec.joint_states, names)
+    groups: dict[str, dict[str, float]] = {}
+    if ref is None:
+        warnings.append(f"model error skipped: {ref_problem or 'no reference torques'}")
+    elif choice.percentile is None:
+        warnings.append("model error skipped: the reference has percentile body sizes only, "
+                        f"the bag's model is {choice.arm.body_size.label}")
+    else:
+        groups = _model_error(results, torques, ref, choice.percentile, names, th)
+        skipped = [r for r in results if r.model_nrmse is None and r.samples]
+        if skipped:
+            warnings.append(f"model error skipped for {len(skipped)} movement(s), e.g. movement "
+                            f"{skipped[0].id}: {skipped[0].model_note}")
+    report = CheckReport(choice, names, results, groups,
+                         delivery(rec.joint_states, torques, th.tail_grace_s), warnings)
+    report.failures = verdicts(report, th)
+    return report
+
+
+def verdicts(report: CheckReport, th: Thresholds) -> list[str]:
+    out = []
+    names = report.joint_names
+    for res in report.movements:
+        if res.state_error > th.state_max_abs_rad:
+            out.append(f"joint_states position off the analytic trajectory by {res.state_error:.3g} "
+                       f"rad in movement {res.id} ({res.name}, {res.elbow}) at DOF {res.state_dof}: "
+                       "the published samples are wrong (publisher side)")
+        value, dof = res.worst(res.pipeline_nrmse, names)
+        if value > th.pipeline_nrmse_max:  # NaN (nothing compared) passes, inf fails
+            out.append(f"pipeline NRMSE {value:.4f} > {th.pipeline_nrmse_max} in movement {res.id} "
+                       f"({res.name}, {res.elbow}) at DOF {dof}")
+    for group, s in report.model_groups.items():
+        if s["median"] > th.model_group_median_nrmse_max:
+            out.append(f"model NRMSE median {s['median']:.3f} > {th.model_group_median_nrmse_max} "
+                       f"for DOF group {group}")
+    d = report.delivery
+    if d.lost > th.loss_max:
+        out.append(f"lost {d.lost} joint_states without joint_torques ({d.loss_pct:.2f} %) "
+                   f"> {th.loss_max}")
+    p99 = d.latency_ms.get("p99", float("nan"))
+    if p99 > th.latency_p99_ms_max:
+        out.append(f"latency p99 {p99:.3f} ms > {th.latency_p99_ms_max} ms")
+    return out

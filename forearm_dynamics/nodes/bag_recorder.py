@@ -1,0 +1,229 @@
+"""bag_recorder: record the pipeline's topics into one MCAP file (ros2 bag, rosbags, check_bag).
+
+Raw subscriptions hand over the CDR bytes; the callback only stamps the receive time and
+appends them to the writer (no deserialisation, no copy beyond rclpy's). log_time =
+publish_time = receive time (system clock, ns): the publisher's send time is not exposed
+to a raw callback under the EventsExecutor, and every stamped message keeps its own
+header stamp inside the payload (check_bag's latency = log_time - header stamp).
+
+Topics (parameter `topics`): the five the pipeline uses by default; an entry is 'name'
+for those or 'name:pkg/msg/Type' for any other. The latched `torque_node/config` is
+subscribed transient-local, so it is recorded even when the recorder starts after the
+torque node. Everything else: reliable, volatile, depth `qos_depth` (1000: a writer
+pause of ~0.5 s at 2 kHz does not drop).
+
+Files: `output` (default forearm_YYYYmmdd_HHMMSS.mcap in the working directory) is
+never overwritten; a missing or unwritable directory is one error line and exit code 2.
+SIGINT/SIGTERM finish the file (summary, statistics; exit 0). After SIGKILL the file
+holds every chunk closed before: chunks close at 1 MiB or every `flush_period` s.
+A write failure (disk full) logs one error, stops recording and exits 1.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from ..bag import (
+    CHUNK_SIZE,
+    FLUSH_PERIOD_S,
+    BagError,
+    BagWriteError,
+    BagWriter,
+    TopicQos,
+)
+from ..bag.schemas import message_class, type_name_of
+from ..bag.writer import COMPRESSION
+from .common import CONFIG_TOPIC, latched_qos, make_executor, spin, stream_qos
+from .params import ParameterError, Params, Spec
+
+DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
+KNOWN_TYPES: dict[str, type] = {
+    "joint_states": JointState,
+    "joint_torques": JointState,
+    "movement": String,
+    "diagnostics": DiagnosticArray,
+    CONFIG_TOPIC: String,
+}
+EXIT_BAD_PARAMETER = 2
+EXIT_WRITE_FAILED = 1
+
+SPECS = (
+    Spec("topics", list(DEFAULT_TOPICS), "topics to record: 'name' (known types) or 'name:pkg/msg/Type'"),
+    Spec("latched_topics", [CONFIG_TOPIC], "topics subscribed transient-local, depth 1"),
+    Spec("output", "", "MCAP file to create ('' = forearm_<date>_<time>.mcap here); never overwritten"),
+    Spec("qos_depth", 1000, "history depth of the stream subscriptions (reliable, volatile)"),
+    Spec("chunk_size", CHUNK_SIZE, "bytes (uncompressed) after which a chunk is closed"),
+    Spec("flush_period", FLUSH_PERIOD_S, "s after which an open chunk is closed anyway"),
+    Spec("compression", "zstd", "chunk compression: zstd, lz4 or none"),
+)
+
+
+@dataclass(frozen=True)
+class TopicPlan:
+    """One subscription: the name as given, its message class and whether it is latched."""
+
+    name: str
+    msg_class: type
+    latched: bool
+
+
+def _strings(p: Params, name: str) -> list[str]:
+    v = p.raw(name)
+    if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) and x for x in v):
+        raise ParameterError(name, f"must be a list of non-empty strings, got {v!r}")
+    return list(v)
+
+
+def _known_type(topic: str) -> type | None:
+    key = topic.strip("/")
+    return KNOWN_TYPES.get(key) or KNOWN_TYPES.get(key.rsplit("/", 1)[-1])
+
+
+def plan_topics(entries: list[str], latched: list[str]) -> list[TopicPlan]:
+    latched_set = {t.strip("/") for t in latched}
+    plans, seen = [], set()
+    for entry in entries:
+        name, _, type_name = entry.partition(":")
+        if name.strip("/") in seen:
+            raise ParameterError("topics", f"topic {name!r} is listed twice")
+        seen.add(name.strip("/"))
+        if type_name:
+            try:
+                cls = message_class(type_name)
+            except BagError as exc:
+                raise ParameterError("topics", str(exc)) from None
+        else:
+            cls = _known_type(name)
+            if cls is None:
+                raise ParameterError("topics", f"type of {name!r} unknown; write it as "
+                                     f"'{name}:pkg/msg/Type'")
+        plans.append(TopicPlan(name, cls, name.strip("/") in latched_set))
+    return plans
+
+
+def default_output() -> Path:
+    return Path.cwd() / f"forearm_{time.strftime('%Y%m%d_%H%M%S')}.mcap"
+
+
+def _topic_qos(qos: QoSProfile) -> TopicQos:
+    return TopicQos(depth=qos.depth, reliability=qos.reliability.name.lower(),
+                    durability=qos.durability.name.lower(), history=qos.history.name.lower())
+
+
+class BagRecorder(Node):
+    """Raw subscriptions -> BagWriter; `done` completes when recording must stop (write failure)."""
+
+    def __init__(self, node_name: str = "bag_recorder"):
+        super().__init__(node_name)
+        p = Params(self, SPECS)
+        plans = plan_topics(_strings(p, "topics"), _strings(p, "latched_topics"))
+        depth = p.integer("qos_depth", 1, 1_000_000)
+        chunk_size = p.integer("chunk_size", 1024, 1 << 30)
+        flush_period = p.number("flush_period", 0.01, 3600.0)
+        compression = p.string("compression", tuple(COMPRESSION))
+        output = p.string("output")
+        for name in p.unknown_overrides():
+            self.get_logger().warning(f"ignoring unknown parameter '{name}'")
+        resolved = []
+        for plan in plans:
+            try:
+                resolved.append(self.resolve_topic_name(plan.name))
+            except Exception as exc:  # noqa: BLE001 - rclpy raises several types for bad names
+                raise ParameterError("topics", f"{plan.name!r} is not a valid topic name ({exc})") from None
+        path = Path(output).expanduser() if output else default_output()
+        try:
+            self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
+                                    compression=compression)
+        except BagWriteError as exc:
+            raise ParameterError("output", str(exc)) from None
+        self.done = Future()
+        self.exit_code = 0
+        self.executor_kind = "events"
+        for plan, topic in zip(plans, resolved, strict=True):
+            qos = latched_qos() if plan.latched else stream_qos(depth)
+            channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
+            self.create_subscription(plan.msg_class, topic, self._callback(channel), qos, raw=True)
+        self.create_timer(flush_period, self._flush_if_due)
+        self.get_logger().info(
+            f"recording {', '.join(resolved)} to {path} (depth {depth}, {compression} chunks of "
+            f"<= {chunk_size} B or {flush_period} s)")
+
+    def _callback(self, channel: int):
+        write, now = self.writer.write, time.time_ns
+
+        def on_message(data: bytes) -> None:
+            try:
+                write(channel, data, now())
+            except BagWriteError as exc:
+                self._stop(exc)
+
+        return on_message
+
+    def _flush_if_due(self) -> None:
+        try:
+            self.writer.flush_if_due()
+        except BagWriteError as exc:
+            self._stop(exc)
+
+    def _stop(self, exc: BagWriteError) -> None:
+        if not self.done.done():
+            self.get_logger().error(str(exc))
+            self.exit_code = EXIT_WRITE_FAILED
+            self.done.set_result(True)
+
+    def finish(self) -> int:
+        """Close the file (summary, statistics); the exit code of the run."""
+        # After SIGINT/SIGTERM the context is gone: the node's logger would fail to reach
+        # /rosout (an rcl error line), so log through a plain logger then.
+        log = self.get_logger() if self.context.ok() else rclpy.logging.get_logger("bag_recorder.close")
+        try:
+            self.writer.close()
+        except BagWriteError as exc:
+            if self.exit_code == 0:
+                log.error(str(exc))
+            return EXIT_WRITE_FAILED
+        counts = ", ".join(f"{t} {n}" for t, n in self.writer.counts().items())
+        log.info(f"wrote {self.writer.message_count} messages to {self.writer.path} "
+                               f"({counts})")
+        return self.exit_code
+
+
+def run(args: list[str] | None = None) -> int:
+    """Record until SIGINT/SIGTERM (exit 0), a write failure (1) or a bad parameter (2)."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = BagRecorder()
+        except ParameterError as exc:
+            rclpy.logging.get_logger("bag_recorder").error(str(exc))
+            return EXIT_BAD_PARAMETER
+        try:
+            spin(node, make_executor(node.executor_kind), done=node.done)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        return node.finish()
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main() -> None:
+    sys.exit(run(sys.argv))
+
+
+if __name__ == "__main__":
+    main()

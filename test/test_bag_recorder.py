@@ -1,0 +1,184 @@
+"""bag_recorder as a real process on loopback DDS: SIGTERM, SIGKILL, bad output paths."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import rosproc
+from rosbags.rosbag2 import Reader
+
+from forearm_dynamics.bag import open_bag, recover
+
+PUBLISHER = r"""
+import sys, time
+import rclpy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+duration, stamps_file = float(sys.argv[1]), sys.argv[2]
+rclpy.init()
+node = rclpy.create_node("test_joint_state_publisher")
+latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+config = node.create_publisher(String, "torque_node/config", latched)
+config.publish(String(data='{"model": "segmented"}'))  # before the recorder exists
+pub = node.create_publisher(JointState, "joint_states", QoSProfile(depth=1000))
+print("waiting", flush=True)
+deadline = time.monotonic() + 30
+while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+    rclpy.spin_once(node, timeout_sec=0.05)
+time.sleep(0.5)  # let the reliable match settle on both sides
+msg = JointState(name=[f"joint_{i}" for i in range(20)], position=[0.1] * 20, velocity=[0.0] * 20)
+stamps = []
+start = time.perf_counter()
+print("publishing", time.time_ns(), flush=True)
+while (now := time.perf_counter()) - start < duration:
+    target = start + len(stamps) * 1e-3
+    if target > now:
+        time.sleep(target - now)
+    ns = time.time_ns()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 10**9)
+    pub.publish(msg)
+    stamps.append(ns)
+with open(stamps_file, "w") as fh:
+    fh.write("\n".join(map(str, stamps)))
+print("published", len(stamps), flush=True)
+time.sleep(0.5)
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+_counter = itertools.count()
+
+
+def private_domain() -> int:
+    """A domain per test, outside rosproc's 1..101, so parallel sessions do not mix."""
+    return 140 + (os.getpid() * 7 + next(_counter)) % 90
+
+
+def start_publisher(tmp_path: Path, domain: int, duration: float) -> tuple[subprocess.Popen, Path, Path]:
+    stamps = tmp_path / "stamps.txt"
+    log = tmp_path / "publisher.out"
+    with log.open("wb") as fh:
+        proc = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(duration), str(stamps)],
+                                env=rosproc.ros_env(domain), stdout=fh, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL)
+    return proc, stamps, log
+
+
+def wait_for(path: Path, text: str, timeout: float = 30.0) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        content = path.read_text() if path.exists() else ""
+        for line in content.splitlines():
+            if line.startswith(text):
+                return line
+        time.sleep(0.02)
+    raise AssertionError(f"{text!r} not seen in {path}: {path.read_text() if path.exists() else ''}")
+
+
+@pytest.fixture
+def processes():
+    """Every process a test starts; stopped (by PID) even when the test fails."""
+    started: list = []
+    yield started
+    for p in started:
+        proc = getattr(p, "proc", p)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+
+
+def test_sigterm_gives_a_complete_bag(tmp_path, processes) -> None:
+    domain = private_domain()
+    pub, stamps_file, log = start_publisher(tmp_path, domain, duration=3.0)
+    processes.append(pub)
+    wait_for(log, "waiting")
+    time.sleep(0.5)  # the latched config exists before the recorder starts
+    out = tmp_path / "run.mcap"
+    rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=domain)
+    processes.append(rec)
+    assert pub.wait(timeout=40) == 0, log.read_text()
+    published = len(stamps_file.read_text().split())
+    time.sleep(0.3)
+    assert rec.stop(signal.SIGTERM) == 0, rec.output()
+    assert "wrote" in rec.output() and "Traceback" not in rec.output()
+
+    bag = open_bag(out)
+    assert bag.info.complete
+    counts = bag.info.topic_counts()
+    assert counts["/joint_states"] == published >= 2500
+    assert counts["/torque_node/config"] == 1  # latched, published before the recorder
+    with Reader(out) as r:  # the independent reader
+        got = {c.topic: c.msgcount for c in r.connections}
+        assert got["/joint_states"] == published
+        assert sum(1 for _ in r.messages()) == published + 1
+    # what was published is what was recorded, in order (stamps inside the CDR payload)
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    recorded = [deserialize_message(m.data, JointState).header.stamp for _c, m in
+                bag.messages(["joint_states"])]
+    sent = [int(s) for s in stamps_file.read_text().split()]
+    assert [s.sec * 10**9 + s.nanosec for s in recorded] == sent
+
+
+def test_sigkill_keeps_the_closed_chunks(tmp_path, processes) -> None:
+    domain = private_domain()
+    pub, stamps_file, log = start_publisher(tmp_path, domain, duration=3.0)
+    processes.append(pub)
+    out = tmp_path / "killed.mcap"
+    rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=domain)
+    processes.append(rec)
+    wait_for(log, "publishing")
+    time.sleep(2.0)
+    kill_ns = time.time_ns()
+    rec.proc.send_signal(signal.SIGKILL)
+    rec.proc.wait(timeout=10)
+    assert pub.wait(timeout=40) == 0, log.read_text()
+    sent = [int(s) for s in stamps_file.read_text().split()]
+    before_kill = sum(s < kill_ns for s in sent)
+
+    bag = open_bag(out)
+    assert not bag.info.complete
+    got = bag.info.topic_counts().get("/joint_states", 0)
+    # chunks close every 0.5 s: at most ~1 s of data may be missing, never more
+    assert before_kill - 1000 <= got <= before_kill, (got, before_kill)
+    fixed = tmp_path / "fixed.mcap"
+    assert recover(out, fixed).messages >= got
+    with Reader(fixed) as r:
+        assert {c.topic: c.msgcount for c in r.connections}["/joint_states"] == got
+
+
+def test_missing_output_directory_exits_2(tmp_path) -> None:
+    out = tmp_path / "no" / "such" / "dir" / "run.mcap"
+    rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=private_domain())
+    assert rec.wait(timeout=30) == 2
+    err = [line for line in rec.output().splitlines() if line.strip()]
+    assert len(err) == 1 and "does not exist" in err[0] and str(out) in err[0]
+    assert not out.parent.exists()
+
+
+def test_existing_output_is_never_overwritten(tmp_path) -> None:
+    out = tmp_path / "keep.mcap"
+    out.write_bytes(b"precious")
+    rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=private_domain())
+    assert rec.wait(timeout=30) == 2
+    assert "exists already" in rec.output()
+    assert out.read_bytes() == b"precious"
+
+
+def test_unknown_topic_type_exits_2(tmp_path) -> None:
+    rec = rosproc.start("bag_recorder", "-p", f"output:={tmp_path / 'x.mcap'}",
+                        "-p", "topics:=[joint_states, mystery]", domain=private_domain())
+    assert rec.wait(timeout=30) == 2
+    assert "mystery:pkg/msg/Type" in rec.output()
+    assert not (tmp_path / "x.mcap").exists()
