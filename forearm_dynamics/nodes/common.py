@@ -2,13 +2,28 @@
 
 from __future__ import annotations
 
+import array
+import sys
+from collections.abc import Callable
+from importlib import metadata
+
+import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+
+from .params import ParameterError
 
 #: Latched topic on which the torque node states its model (kind, body size, joint names).
 CONFIG_TOPIC = "torque_node/config"
+
+#: Exit code of a node that refuses its parameters.
+EXIT_BAD_PARAMETER = 2
+
+EXECUTORS = ("events", "single")
 
 
 def latched_qos() -> QoSProfile:
@@ -29,6 +44,18 @@ def stream_qos(depth: int = 100, reliable: bool = True) -> QoSProfile:
     )
 
 
+def float_field(msg, field: str, n: int) -> np.ndarray:
+    """Give msg.<field> (float64[]) n zeros and return a writable numpy view of what the
+    message stores: write the view, publish the message, nothing is allocated per sample.
+
+    The view is taken from the field after assignment because the generated setter keeps
+    an array.array as is only when field checks are on (ROS_PYTHON_CHECK_FIELDS=1) and
+    copies it otherwise.
+    """
+    setattr(msg, field, array.array("d", bytes(8 * n)))
+    return np.frombuffer(getattr(msg, field), dtype=np.float64)
+
+
 def make_executor(kind: str = "events"):
     """EventsExecutor measured best at 1 kHz on these wheels; single-threaded as a fallback."""
     if kind == "events":
@@ -40,18 +67,68 @@ def make_executor(kind: str = "events"):
     raise ValueError(f"executor must be 'events' or 'single', got {kind!r}")
 
 
-def spin(node: Node, executor=None, timeout_sec: float = 0.1) -> None:
-    """Spin until SIGINT/SIGTERM or shutdown.
+def spin(node: Node, executor=None, timeout_sec: float = 0.5, done: Future | None = None) -> None:
+    """Spin until SIGINT/SIGTERM, shutdown, or `done` completes.
 
-    EventsExecutor.spin() in these wheels burns a core and ignores SIGINT, so loop on
-    spin_once with a timeout while rclpy.ok().
+    EventsExecutor.spin() in these wheels burns a core and ignores SIGINT, so wait on a
+    future with a timeout while rclpy.ok(); the context's shutdown wakes the executor.
     """
     executor = executor or make_executor()
+    done = done or Future()
     executor.add_node(node)
     try:
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=timeout_sec)
+        while rclpy.ok() and not done.done():
+            executor.spin_until_future_complete(done, timeout_sec=timeout_sec)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        # SIGINT/SIGTERM shut the context down while a callback was publishing: rcl then
+        # raises "context is invalid". That is a normal exit; anything else is a bug.
+        if rclpy.ok():
+            raise
     finally:
-        executor.remove_node(node)
+        try:
+            executor.remove_node(node)
+        except Exception:  # noqa: BLE001, S110 - the context may already be shut down
+            pass
+
+
+def package_version() -> str:
+    try:
+        return metadata.version("forearm_dynamics")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
+    """Create the node, spin it, clean up; exit code 0, or 2 for a refused parameter.
+
+    SIGINT and SIGTERM (rclpy's signal handlers) shut the context down, which ends spin().
+    The node may set `executor_kind` and `done` (a Future) to steer the spin.
+    """
+    try:
+        rclpy.init(args=args)
+    except _rclpy.RCLError as exc:  # an unreadable --params-file or malformed --ros-args
+        print(f"[ERROR] [{name}]: invalid arguments: {exc}", file=sys.stderr)
+        return EXIT_BAD_PARAMETER
+    node = None
+    try:
+        try:
+            node = make_node()
+        except ParameterError as exc:
+            rclpy.logging.get_logger(name).error(str(exc))
+            return EXIT_BAD_PARAMETER
+        executor = make_executor(getattr(node, "executor_kind", "events"))
+        spin(node, executor, done=getattr(node, "done", None))
+        return getattr(node, "exit_code", 0)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main_for(make_node: Callable[[], Node], name: str) -> None:
+    """Console-script entry point: run the node and exit with its code."""
+    sys.exit(run(make_node, name, sys.argv))

@@ -1,0 +1,261 @@
+"""trajectory_publisher: replay library movements as JointState at rate_hz (default 1 kHz).
+
+Each sample is stamped with the ROS clock at publication and q, qd are the movement
+evaluated at exactly that stamp (t = stamp - t0, t0 = stamp of the movement's first
+sample), so position and velocity agree with the stamp; samples are therefore not exactly
+1/rate apart, and that is fine. A movement has round(duration * rate_hz) samples on the
+nominal grid t0 + k/rate_hz; a timer tick publishes every sample that is due (normally
+one), so a late tick is caught up (at most MAX_BURST samples) instead of losing samples.
+
+At each movement start a JSON marker goes out on `movement` (reliable, transient local,
+depth 100): id, name, elbow, body_size, t0 (s) and t0_ns of its first sample. Without
+`loop`, the node waits until subscribers acknowledged everything (up to `drain` s) and
+exits 0. Parameters: config/trajectory_publisher.yaml; an invalid one -> exit code 2.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from ..anthropometry import resolve_body_size
+from ..description import JOINT_NAMES
+from ..movements import Movement, get_movement, movement_library
+from .common import EXECUTORS, float_field, main_for, stream_qos
+from .params import ParameterError, Params, Spec
+
+#: Samples one late tick may catch up (0.5 s at 1 kHz, within the default depth of 1000);
+#: beyond that they are skipped with a warning. A ~0.3 s stall of the process was seen.
+MAX_BURST = 500
+
+SPECS = (
+    Spec("movements", list(range(1, 66)), "movement ids (1-65) in replay order; default all"),
+    Spec("body_size", 50, "percentile 5, 50 or 95 (recorded in the markers; angles are the same)"),
+    Spec("rate_hz", 1000.0, "samples per second"),
+    Spec("loop", False, "replay the list forever"),
+    Spec("start_delay", 5.0, "s to wait before the first sample (discovery settles; see YAML)"),
+    Spec("subscriber_timeout", 10.0, "s to wait for a joint_states subscriber; then start anyway"),
+    Spec("gap", 0.0, "s of silence between movements"),
+    Spec("drain", 2.0, "s to wait at the end for subscribers to acknowledge everything"),
+    Spec("output_topic", "joint_states", "JointState output"),
+    Spec("marker_topic", "movement", "JSON marker at each movement start"),
+    Spec("qos_depth", 1000, "history depth of the JointState stream (1 s at 1 kHz)"),
+    Spec("qos_reliable", True, "reliable (true) or best-effort (false) stream"),
+    Spec("executor", "events", "'events' or 'single'"),
+)
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    """The validated parameters of one replay."""
+
+    movements: tuple[Movement, ...]
+    body_size: int
+    rate_hz: float
+    loop: bool
+    start_delay: float
+    subscriber_timeout: float
+    gap: float
+    drain: float
+    output_topic: str
+    marker_topic: str
+    qos_depth: int
+    qos_reliable: bool
+    executor: str
+
+    @classmethod
+    def from_params(cls, p: Params) -> ReplaySettings:
+        ids = p.integers("movements", 1, len(movement_library()))
+        body_size = p.integer("body_size")
+        try:
+            resolve_body_size(body_size)
+        except ValueError as exc:
+            raise ParameterError("body_size", str(exc)) from None
+        return cls(
+            movements=tuple(get_movement(i) for i in ids),
+            body_size=body_size,
+            rate_hz=p.number("rate_hz", 1e-3, 10000.0),
+            loop=p.boolean("loop"),
+            start_delay=p.number("start_delay", 0.0, 3600.0),
+            subscriber_timeout=p.number("subscriber_timeout", 0.0, 3600.0),
+            gap=p.number("gap", 0.0, 3600.0),
+            drain=p.number("drain", 0.0, 600.0),
+            output_topic=p.topic("output_topic"),
+            marker_topic=p.topic("marker_topic"),
+            qos_depth=p.integer("qos_depth", 1, 100000),
+            qos_reliable=p.boolean("qos_reliable"),
+            executor=p.string("executor", EXECUTORS),
+        )
+
+
+def marker_qos() -> QoSProfile:
+    """Reliable and transient local: a recorder that joins late still gets the markers."""
+    return QoSProfile(
+        depth=100,
+        history=HistoryPolicy.KEEP_LAST,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+
+
+class TrajectoryPublisher(Node):
+    """Timer-driven replay: waiting -> (movement, gap)* -> drain -> done."""
+
+    def __init__(self, node_name: str = "trajectory_publisher"):
+        super().__init__(node_name)
+        self.params = Params(self, SPECS)
+        s = self.settings = ReplaySettings.from_params(self.params)
+        self.params.refuse_changes()
+        for name in self.params.unknown_overrides():
+            self.get_logger().warning(f"ignoring unknown parameter '{name}'")
+        self.executor_kind = s.executor
+        self.done = Future()
+        self.exit_code = 0
+
+        self.msg = JointState()
+        self.msg.name = list(JOINT_NAMES)
+        self._q = float_field(self.msg, "position", len(JOINT_NAMES))
+        self._qd = float_field(self.msg, "velocity", len(JOINT_NAMES))
+        self.pub = self.create_publisher(
+            JointState, s.output_topic, stream_qos(s.qos_depth, s.qos_reliable)
+        )
+        self.marker_pub = self.create_publisher(String, s.marker_topic, marker_qos())
+
+        self._period_ns = round(1e9 / s.rate_hz)
+        self._started_ns = self._now_ns()
+        self._playing = False
+        self._index = -1  # position in the playlist
+        self.movement: Movement = s.movements[0]  # the one playing (or last played)
+        self._next_start_ns: int | None = None  # when the next movement is due
+        self._k = 0  # next sample of the current movement
+        self._n = 0  # samples in the current movement
+        self._t0_ns = 0
+        self.sent = 0
+        self.skipped = 0
+        self.timer = self.create_timer(1.0 / s.rate_hz, self._tick)
+        total = sum(m.duration for m in s.movements)
+        self.get_logger().info(
+            f"{len(s.movements)} movement(s), {total:.1f} s at {s.rate_hz:g} Hz on "
+            f"{self.pub.topic_name}{' (looping)' if s.loop else ''}"
+        )
+
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    # -- state machine -------------------------------------------------------------------
+    def _tick(self) -> None:
+        now = self._now_ns()
+        if self._next_start_ns is None and not self._playing:
+            if not self._ready(now):
+                return
+            self._next_start_ns = now
+        half = self._period_ns // 2
+        if not self._playing:
+            if now + half < self._next_start_ns:
+                return
+            if not self._advance():
+                self._finish()
+                return
+        due = min(self._n, (now - self._t0_ns + half) // self._period_ns + 1) if self._k else 1
+        if due - self._k > MAX_BURST:
+            self.skipped += due - self._k - MAX_BURST
+            self.get_logger().warning(
+                f"timer {(due - self._k) / self.settings.rate_hz * 1e3:.0f} ms late: "
+                f"skipping {due - self._k - MAX_BURST} samples", throttle_duration_sec=1.0
+            )
+            self._k = due - MAX_BURST
+        while self._k < due:
+            self._publish_sample()
+        if self._k >= self._n:
+            self._playing = False
+            self._next_start_ns = self._t0_ns + self._n * self._period_ns + round(
+                self.settings.gap * 1e9
+            )
+
+    def _ready(self, now: int) -> bool:
+        """Start delay over and a subscriber present (or the wait for one timed out)."""
+        s = self.settings
+        waited = (now - self._started_ns) * 1e-9
+        if waited < s.start_delay:
+            return False
+        if self.pub.get_subscription_count() > 0:
+            return True
+        if waited < s.start_delay + s.subscriber_timeout:
+            return False
+        self.get_logger().warning(
+            f"no subscriber on {self.pub.topic_name} after {waited:.1f} s; publishing anyway"
+        )
+        return True
+
+    def _advance(self) -> bool:
+        """Move to the next movement of the playlist; False when the replay is over."""
+        self._index += 1
+        movements = self.settings.movements
+        if self._index >= len(movements):
+            if not self.settings.loop:
+                return False
+            self._index = 0
+        self.movement = movements[self._index]
+        self._n = max(1, round(self.movement.duration * self.settings.rate_hz))
+        self._k = 0
+        self._playing = True
+        return True
+
+    def _publish_sample(self) -> None:
+        stamp = self.get_clock().now()
+        t_ns = stamp.nanoseconds
+        if self._k == 0:
+            self._t0_ns = t_ns
+            self._publish_marker(t_ns)
+        q, qd, _ = self.movement.evaluate((t_ns - self._t0_ns) / 1e9)
+        np.copyto(self._q, q[0])
+        np.copyto(self._qd, qd[0])
+        self.msg.header.stamp = stamp.to_msg()
+        self.pub.publish(self.msg)
+        self._k += 1
+        self.sent += 1
+
+    def _publish_marker(self, t0_ns: int) -> None:
+        m = self.movement
+        info = {
+            "id": m.id,
+            "name": m.name,
+            "elbow": m.elbow,
+            "body_size": self.settings.body_size,
+            "t0_ns": t0_ns,
+            "t0": t0_ns / 1e9,
+            "duration": m.duration,
+            "samples": self._n,
+            "rate_hz": self.settings.rate_hz,
+            "index": self._index,
+        }
+        self.marker_pub.publish(String(data=json.dumps(info)))
+        self.get_logger().info(f"movement {m.id} ({m.name}, {m.elbow})")
+
+    def _finish(self) -> None:
+        """Stop the timer, let reliable subscribers acknowledge, then end the spin."""
+        self.timer.cancel()
+        drain = Duration(nanoseconds=round(self.settings.drain * 1e9))
+        acked = all(p.wait_for_all_acked(drain) for p in (self.pub, self.marker_pub))
+        self.get_logger().info(
+            f"done: {self.sent} samples, {self.skipped} skipped"
+            + ("" if acked else f"; not all acknowledged within {self.settings.drain:g} s")
+        )
+        self.done.set_result(True)
+
+
+def main() -> None:
+    main_for(TrajectoryPublisher, "trajectory_publisher")
+
+
+if __name__ == "__main__":
+    main()
+
