@@ -22,6 +22,9 @@ test: setup
 	$(VENV)/bin/ruff check .
 	ROS_DOMAIN_ID=71 $(PY) -m pytest -q test
 
+demo: setup
+	ROS_DOMAIN_ID=73 $(VENV)/bin/demo --out demo_out
+
 lint: setup
 	$(VENV)/bin/ruff check .
 

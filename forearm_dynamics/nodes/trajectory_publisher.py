@@ -42,7 +42,8 @@ SPECS = (
     Spec("rate_hz", 1000.0, "samples per second"),
     Spec("loop", False, "replay the list forever"),
     Spec("start_delay", 5.0, "s to wait before the first sample (discovery settles; see YAML)"),
-    Spec("subscriber_timeout", 10.0, "s to wait for a joint_states subscriber; then start anyway"),
+    Spec("subscriber_timeout", 10.0, "s to wait for joint_states subscribers; then start anyway"),
+    Spec("min_subscribers", 1, "subscribers to wait for (2 with torque_node + bag_recorder)"),
     Spec("gap", 0.0, "s of silence between movements"),
     Spec("drain", 2.0, "s to wait at the end for subscribers to acknowledge everything"),
     Spec("output_topic", "joint_states", "JointState output"),
@@ -63,6 +64,7 @@ class ReplaySettings:
     loop: bool
     start_delay: float
     subscriber_timeout: float
+    min_subscribers: int
     gap: float
     drain: float
     output_topic: str
@@ -86,6 +88,7 @@ class ReplaySettings:
             loop=p.boolean("loop"),
             start_delay=p.number("start_delay", 0.0, 3600.0),
             subscriber_timeout=p.number("subscriber_timeout", 0.0, 3600.0),
+            min_subscribers=p.integer("min_subscribers", 0, 1000),
             gap=p.number("gap", 0.0, 3600.0),
             drain=p.number("drain", 0.0, 600.0),
             output_topic=p.topic("output_topic"),
@@ -181,17 +184,19 @@ class TrajectoryPublisher(Node):
             )
 
     def _ready(self, now: int) -> bool:
-        """Start delay over and a subscriber present (or the wait for one timed out)."""
+        """Start delay over and enough subscribers present (or the wait for them timed out)."""
         s = self.settings
         waited = (now - self._started_ns) * 1e-9
         if waited < s.start_delay:
             return False
-        if self.pub.get_subscription_count() > 0:
+        count = self.pub.get_subscription_count()
+        if count >= s.min_subscribers:
             return True
         if waited < s.start_delay + s.subscriber_timeout:
             return False
         self.get_logger().warning(
-            f"no subscriber on {self.pub.topic_name} after {waited:.1f} s; publishing anyway"
+            f"{count} of {s.min_subscribers} subscribers on {self.pub.topic_name} after "
+            f"{waited:.1f} s; publishing anyway"
         )
         return True
 

@@ -1,0 +1,133 @@
+"""demo: torque node, recorder and replay of the 65 movements as separate processes, then check.
+
+Starts `torque_node` and `bag_recorder`, waits until both listen on `joint_states`, runs
+`trajectory_publisher` (all 65 movements, 50th percentile) to the end, stops the nodes it
+started (SIGINT, by PID), runs `check_bag` and draws the recorded torques. DDS stays on
+loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) in its own ROS_DOMAIN_ID.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .common import die
+
+BIN = Path(sys.executable).parent
+
+
+def ros_env(domain: int, log_dir: Path) -> dict[str, str]:
+    """Children get loopback-only DDS in our domain; wheel bootstrap state is not inherited."""
+    drop = ("ROS_", "RMW_", "LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(drop)}
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(log_dir), HOME=os.environ.get("HOME") or tempfile.gettempdir(),
+               PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+    return env
+
+
+class Child:
+    """A started executable, its log file, stopped by its own PID only."""
+
+    def __init__(self, name: str, args: list[str], env: dict, logs: Path):
+        self.name = name
+        self.log = logs / f"{name}.log"
+        self._fh = open(self.log, "wb")  # noqa: SIM115 - closed in stop()
+        self.proc = subprocess.Popen([str(BIN / name), *args], env=env, stdout=self._fh,
+                                     stderr=subprocess.STDOUT)
+
+    def stop(self, timeout: float = 15.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._fh.close()
+        return self.proc.returncode
+
+    def text(self) -> str:
+        return self.log.read_text(errors="replace")
+
+
+def wait_for_listeners(env: dict, topic: str, count: int, timeout: float) -> bool:
+    """Ask the ROS graph (from a short-lived child) until `count` nodes subscribe to topic."""
+    code = (
+        "import sys, time, rclpy\n"
+        "rclpy.init(); n = rclpy.create_node('demo_probe')\n"
+        f"end = time.monotonic() + {timeout}\n"
+        f"while time.monotonic() < end and n.count_subscribers('{topic}') < {count}:\n"
+        "    rclpy.spin_once(n, timeout_sec=0.1)\n"
+        f"ok = n.count_subscribers('{topic}') >= {count}\n"
+        "n.destroy_node(); rclpy.shutdown(); sys.exit(0 if ok else 1)\n"
+    )
+    return subprocess.run([sys.executable, "-c", code], env=env, timeout=timeout + 30,
+                          check=False).returncode == 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="demo", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("demo_out"))
+    ap.add_argument("--movements", default="", help="comma-separated ids (default: all 65)")
+    ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "73") or 73))
+    args = ap.parse_args(argv)
+    stamp = time.strftime("%Y%m%d_%H%M%S")
+    out = args.out / stamp
+    try:
+        (out / "logs").mkdir(parents=True, exist_ok=False)
+    except OSError as exc:
+        return die(f"demo: cannot create {out}: {exc.strerror or exc}")
+    env = ros_env(args.domain, out / "logs")
+    bag = out / "run.mcap"
+    ids = [int(x) for x in args.movements.split(",") if x.strip()]
+    pub_args = ["--ros-args", "-p", "loop:=false", "-p", "min_subscribers:=2"]
+    if ids:
+        pub_args += ["-p", f"movements:={ids}"]
+    t0 = time.monotonic()
+    print(f"demo: ROS_DOMAIN_ID={args.domain}, loopback only; output in {out}")
+    children = [Child("torque_node", [], env, out / "logs"),
+                Child("bag_recorder", ["--ros-args", "-p", f"output:={bag}"], env, out / "logs")]
+    try:
+        if not wait_for_listeners(env, "joint_states", 2, timeout=30.0):
+            return die("demo: torque_node and bag_recorder did not come up; see " + str(out / "logs"))
+        n = len(ids) or 65
+        print(f"demo: replaying {n} movements at 1 kHz (~{n * 1.5:.0f} s)...", flush=True)
+        pub = Child("trajectory_publisher", pub_args, env, out / "logs")
+        code = pub.proc.wait(timeout=n * 1.5 * 3 + 60)
+        pub.stop()
+        if code != 0:
+            return die(f"demo: trajectory_publisher exited {code}; see {pub.log}")
+        time.sleep(0.5)  # let the last answers reach the recorder
+    finally:
+        codes = {c.name: c.stop() for c in reversed(children)}
+    if any(codes.values()):
+        return die(f"demo: a node exited badly {codes}; logs in {out / 'logs'}")
+    report = out / "check.json"
+    check = subprocess.run([str(BIN / "check_bag"), str(bag), "--json", str(report)], env=env,
+                           check=False)
+    plot = out / "torques.png"
+    try:
+        from .demo_plot import draw
+
+        draw(bag, plot)
+    except Exception as exc:  # noqa: BLE001 - a missing plot must not hide the check result
+        print(f"demo: no plot ({exc})", file=sys.stderr)
+    summary = json.loads(report.read_text()) if report.is_file() else {}
+    print(f"\ndemo finished in {time.monotonic() - t0:.0f} s: check_bag exit {check.returncode} "
+          f"({'PASS' if check.returncode == 0 else 'FAIL'})")
+    print(f"  bag:    {bag}\n  report: {report}\n  plot:   {plot}\n  logs:   {out / 'logs'}")
+    if summary.get("failures"):
+        print("  failures: " + "; ".join(summary["failures"][:5]))
+    return check.returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
