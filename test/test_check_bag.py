@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
+from rosproc import ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -204,9 +205,9 @@ def test_truncated_bag_is_analysed_with_a_warning(good_bag, reference, tmp_path,
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "HOME": os.environ.get("HOME", "/tmp")}
+    # a clean ROS environment: the child re-runs the wheels' bootstrap itself
     return subprocess.run([sys.executable, "-m", "forearm_dynamics.cli.check_bag", *args],
-                          check=False, capture_output=True, text=True, env=env, timeout=60)
+                          check=False, capture_output=True, text=True, env=ros_env(), timeout=60)
 
 
 @pytest.mark.parametrize("case", ["empty", "random", "magic_only", "cut_early", "missing"])
