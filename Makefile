@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup test demo lint bench reference reproduce clean
+.PHONY: setup test demo lint bench soak reference reproduce clean
 
 setup: $(VENV)/.installed
 
@@ -27,6 +27,14 @@ demo: setup
 
 lint: setup
 	$(VENV)/bin/ruff check .
+
+bench: setup
+	ROS_DOMAIN_ID=75 $(PY) -m forearm_dynamics.bench --out benchmarks/results.json
+
+# 10 min of looping replay at 1 kHz (make soak SOAK_MINUTES=2 for a shorter run)
+SOAK_MINUTES ?= 10
+soak: setup
+	ROS_DOMAIN_ID=77 $(PY) -m forearm_dynamics.bench.soak --minutes $(SOAK_MINUTES) --out benchmarks/soak.json
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache

@@ -5,8 +5,9 @@ model's inverse dynamics at the exact analytic state of each recorded stamp,
 movement.evaluate(stamp - t0). Not filtered: both series are sampled at the same stamps,
 and a sample-level error (late or wrong acceleration estimate, a stale sample) is what a
 controller downstream receives; a 6 Hz filter would hide it. NRMSE per DOF per movement
-= RMSE / peak-to-peak of the exact torques of that DOF in that movement; DOFs whose
-peak-to-peak is under config/analysis.yaml ptp_floor_nm are left out and counted.
+= RMSE / peak-to-peak of the exact torques of that DOF over the whole movement (also when
+the bag holds only part of it); DOFs whose peak-to-peak is under config/analysis.yaml
+ptp_floor_nm are left out and counted.
 
 Model error (how far is the shipped model from the gold standard?): recorded effort,
 linearly resampled to the reference's uniform grid (k / rate_hz from t0), vs the OpenSim
@@ -144,8 +145,16 @@ def _window(torques: JointSeries, t0_ns: int, window_ns: int) -> np.ndarray:
     return (torques.stamp_ns >= t0_ns) & (torques.stamp_ns < t0_ns + window_ns)
 
 
+def _movement_ptp(arm, mv, cache: dict[int, np.ndarray]) -> np.ndarray:
+    """Peak-to-peak of the exact torques over the whole movement (1 kHz grid): the scale of
+    the pipeline NRMSE, also for a movement the bag holds only part of (a cut recording)."""
+    if mv.id not in cache:
+        cache[mv.id] = np.ptp(arm.inverse_dynamics(*mv.evaluate(mv.sample_times(1000.0))), axis=0)
+    return cache[mv.id]
+
+
 def _pipeline(arm, marker: Marker, next_t0: int | None, torques: JointSeries, floor: float,
-              index: int) -> MovementResult:
+              index: int, ptp_cache: dict[int, np.ndarray] | None = None) -> MovementResult:
     mv = get_movement(marker.id)
     window = round(mv.duration * 1e9)
     if next_t0 is not None:  # back-to-back movements: a sample belongs to one only
@@ -165,7 +174,7 @@ def _pipeline(arm, marker: Marker, next_t0: int | None, torques: JointSeries, fl
     t = (torques.stamp_ns[sel] - marker.t0_ns) / 1e9
     exact = arm.inverse_dynamics(*mv.evaluate(t))
     err = rmse(torques.effort[sel], exact)
-    ptp = np.ptp(exact, axis=0)
+    ptp = _movement_ptp(arm, mv, {} if ptp_cache is None else ptp_cache)
     keep = ptp >= floor
     with np.errstate(divide="ignore", invalid="ignore"):
         # a NaN effort (missing joint) must fail, not vanish: report it as infinite error
@@ -262,10 +271,11 @@ def analyse(rec: Recording, choice: ModelChoice, ref: ReferenceTorques | None, t
     floor = float(analysis_config()["ptp_floor_nm"])
     torques = rec.joint_torques
     results = []
+    ptp_cache: dict[int, np.ndarray] = {}
     for k, marker in enumerate(rec.markers):
         next_t0 = rec.markers[k + 1].t0_ns if k + 1 < len(rec.markers) else None
         try:
-            results.append(_pipeline(arm, marker, next_t0, torques, floor, k))
+            results.append(_pipeline(arm, marker, next_t0, torques, floor, k, ptp_cache))
         except ValueError as exc:
             warnings.append(f"movement marker {marker.id} ignored: {exc}")
     for res in results:

@@ -18,5 +18,6 @@ class BagError(Exception):
 class BagWriteError(BagError):
     """Writing failed (disk full, read-only, missing directory); the file was closed."""
 
-    def __init__(self, message: str, kind: str = "write"):
+    def __init__(self, message: str, kind: str = "write", why: str = ""):
         super().__init__(kind, message)
+        self.why = why or message  # the OS's reason alone, e.g. 'No space left on device'

@@ -10,15 +10,19 @@ Format decisions (why):
   recorder loses at most the open chunk. zstd (level 3) shrinks JointState chunks ~15x.
 - Bytes go straight to the file descriptor (no user-space buffer): a closed chunk is in
   the kernel's page cache and survives SIGKILL of the recorder.
-- Every OSError (disk full, read-only, I/O error) becomes BagWriteError naming the file;
-  the descriptor is closed and later writes fail fast. What was written up to the last
-  complete chunk stays readable (`check_bag BAG --recover OUT`).
+- Every OSError (disk full, read-only, I/O error) becomes BagWriteError naming the file
+  and how many messages the completed chunks hold; a partly written record is cut off
+  (ftruncate, which also gives the space back), the descriptor is closed and later writes
+  fail fast. What was written up to the last complete chunk stays readable
+  (`check_bag BAG --recover OUT`). `durable_count` is the number of messages in chunks
+  already handed to the kernel; `on_chunk(durable_count)` is called after each chunk.
 """
 
 from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Self
@@ -106,11 +110,15 @@ class _Stats:
 def open_exclusive(path: Path, overwrite: bool = False) -> int:
     """Open for writing; refuse an existing file unless asked; one clear error otherwise."""
     flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
+    if path.is_dir():
+        raise BagWriteError(f"cannot create {path}: it is a directory", "exists")
     try:
         return os.open(path, flags | getattr(os, "O_CLOEXEC", 0), 0o644)
     except FileExistsError:
         raise BagWriteError(f"{path} exists already; refusing to overwrite it", "exists") from None
-    except FileNotFoundError:
+    except FileNotFoundError as exc:
+        if path.parent.is_dir():  # e.g. under /proc: the directory exists, files cannot be made
+            raise BagWriteError(f"cannot create {path}: {exc.strerror}", "missing") from None
         raise BagWriteError(f"cannot create {path}: directory {path.parent} does not exist",
                             "missing") from None
     except IsADirectoryError:
@@ -138,15 +146,22 @@ class BagWriter:
         self._seq: dict[int, int] = {}
         self._closed = False
         self._error: BagWriteError | None = None
+        self._durable = 0  # messages in chunks already written to the file
+        self.on_chunk: Callable[[int], None] | None = None
         self._fd = open_exclusive(self.path, overwrite)
-        self._sink = _FdSink(self._fd)
-        self._mcap = McapWriter(self._sink, chunk_size=chunk_size, compression=COMPRESSION[compression])
-        self._last_flush = time.monotonic()
         try:
+            self._sink = _FdSink(self._fd)
+            self._mcap = McapWriter(self._sink, chunk_size=chunk_size,
+                                    compression=COMPRESSION[compression])
+            self._last_flush = time.monotonic()
             self._guard(self._mcap.start, PROFILE, library or library_string())
-        except BagWriteError:
+        except BaseException as exc:  # disk full, or a signal (KeyboardInterrupt) right now
+            if self._error is None:
+                os.close(self._fd)
             if not overwrite:  # we created it: do not leave an empty, headerless file behind
                 self.path.unlink(missing_ok=True)
+            if isinstance(exc, BagWriteError):
+                raise BagWriteError(f"cannot write to {self.path}: {exc.why}") from None
             raise
 
     # -- schema and channel registration -----------------------------------------------
@@ -184,6 +199,7 @@ class BagWriter:
         st = self._stats
         ch = st.channels[channel_id]
         seq = self._seq[channel_id] = self._seq[channel_id] + 1 if sequence is None else sequence
+        pos = self._sink.pos
         try:
             self._mcap.add_message(channel_id, log_time_ns, data,
                                    log_time_ns if publish_time_ns is None else publish_time_ns, seq)
@@ -195,6 +211,8 @@ class BagWriter:
         st.count += 1
         st.start_ns = min(st.start_ns, log_time_ns)
         st.end_ns = max(st.end_ns, log_time_ns)
+        if self._sink.pos != pos:  # a chunk (this message its last) reached the file
+            self._chunk_written()
 
     def flush_if_due(self) -> None:
         """Close the open chunk if it is older than flush_period_s (call from a timer)."""
@@ -208,13 +226,26 @@ class BagWriter:
             self._guard(self._flush_chunk)
 
     def _flush_chunk(self) -> None:
+        pos = self._sink.pos
         self._mcap.flush()
         self._last_flush = time.monotonic()
+        if self._sink.pos != pos:
+            self._chunk_written()
+
+    def _chunk_written(self) -> None:
+        self._durable = self._stats.count
+        if self.on_chunk is not None:
+            self.on_chunk(self._durable)
 
     # -- state -------------------------------------------------------------------------
     @property
     def message_count(self) -> int:
         return self._stats.count
+
+    @property
+    def durable_count(self) -> int:
+        """Messages in completed chunks: what a SIGKILL right now would leave readable."""
+        return self._durable
 
     def counts(self) -> dict[str, int]:
         return {c.topic: c.count for c in self._stats.channels.values()}
@@ -230,6 +261,7 @@ class BagWriter:
         if self._error is not None:
             self._closed = True
             raise self._error
+        self._guard(self._flush_chunk)  # the last chunk first, counted as durable
         st = self._stats
         topics = [TopicSummary(c.topic, c.type_name, c.qos, c.type_hash, c.count)
                   for c in st.channels.values()]
@@ -269,9 +301,15 @@ class BagWriter:
             raise self._fail(exc) from None
 
     def _fail(self, exc: OSError) -> BagWriteError:
+        lost = self._stats.count - self._durable
         self._error = BagWriteError(
-            f"writing {self.path} failed: {exc.strerror or exc}; the file holds the chunks "
-            "completed before (recover them with `check_bag BAG --recover OUT`)")
+            f"writing {self.path} failed: {exc.strerror or exc}; its completed chunks keep "
+            f"{self._durable} messages ({lost} in the open chunk are lost); "
+            "`check_bag BAG --recover OUT` makes it a complete bag", why=exc.strerror or str(exc))
+        try:
+            os.ftruncate(self._fd, self._sink.pos)  # cut a partly written record
+        except OSError:
+            pass
         try:
             os.close(self._fd)
         except OSError:

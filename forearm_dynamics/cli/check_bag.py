@@ -5,7 +5,8 @@
 
 Exit codes: 0 all thresholds met; 1 a threshold exceeded (each failure named: movement,
 DOF, value); 2 the bag cannot be analysed (missing, empty, not MCAP, truncated before the
-first complete chunk, no joint_torques, no movement markers): one line, no traceback.
+first complete chunk, a damaged chunk in an indexed bag, no joint_torques, torques without
+the model's joints, no movement markers or none of a known movement): one line, no traceback.
 A truncated bag that still holds data is analysed, with a warning.
 """
 
@@ -24,6 +25,7 @@ from ..bag import BagError, open_bag, recover
 from ..bag.check import CheckReport, Thresholds, analyse
 from ..bag.decode import read_config, read_recording
 from ..bag.model_config import model_from_config
+from ..movements import get_movement, movement_library
 from ..reference import ReferenceTorques, load_reference, read_reference
 from .common import die
 
@@ -41,6 +43,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--recover", type=Path, metavar="OUT",
                     help="rewrite a truncated bag as a complete one into OUT, then exit")
     return ap.parse_args(argv)
+
+
+def _known_movement(movement_id: int) -> bool:
+    try:
+        get_movement(movement_id)
+    except (ValueError, KeyError, IndexError):
+        return False
+    return True
 
 
 def _reference(path: Path | None) -> tuple[ReferenceTorques | None, str | None]:
@@ -171,6 +181,13 @@ def run(args: argparse.Namespace) -> int:
     if not rec.markers:
         raise BagError("foreign", f"{args.bag}: no movement markers on the movement topic; "
                        "cannot split the run into movements")
+    if not any(_known_movement(m.id) for m in rec.markers):
+        ids = sorted({m.id for m in rec.markers})
+        raise BagError("foreign", f"{args.bag}: no movement marker names a known movement (ids "
+                       f"{ids[:5]}{' ...' if len(ids) > 5 else ''}; known 1..{len(movement_library())})")
+    if not np.isfinite(rec.joint_torques.effort).all(axis=1).any():
+        raise BagError("foreign", f"{args.bag}: no joint_torques message carries an effort for every "
+                       f"joint of the {choice.arm.kind} model; not this model's torques")
     if not info.complete:
         rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
                             f"{info.message_count} messages of its complete chunks")

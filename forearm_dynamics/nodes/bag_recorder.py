@@ -14,13 +14,18 @@ pause of ~0.5 s at 2 kHz does not drop).
 
 Files: `output` (default forearm_YYYYmmdd_HHMMSS.mcap in the working directory) is
 never overwritten; a missing or unwritable directory is one error line and exit code 2.
-SIGINT/SIGTERM finish the file (summary, statistics; exit 0). After SIGKILL the file
-holds every chunk closed before: chunks close at 1 MiB or every `flush_period` s.
-A write failure (disk full) logs one error, stops recording and exits 1.
+SIGINT/SIGTERM finish the file (summary, statistics; exit 0), also during start-up (an
+empty, complete bag) and when a second signal arrives while the file is being closed.
+After SIGKILL the file holds every chunk closed before: chunks close at 1 MiB or every
+`flush_period` s (each closed chunk is logged at debug level with the messages it makes
+safe: `--log-level bag_recorder:=debug`). A write failure (disk full) logs one error
+naming the messages kept, stops recording and exits 1; it is not retried. Parameters are
+read at start-up; runtime changes are refused.
 """
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -29,6 +34,7 @@ from pathlib import Path
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
@@ -128,6 +134,7 @@ class BagRecorder(Node):
     def __init__(self, node_name: str = "bag_recorder"):
         super().__init__(node_name)
         p = Params(self, SPECS)
+        p.refuse_changes()
         plans = plan_topics(_strings(p, "topics"), _strings(p, "latched_topics"))
         depth = p.integer("qos_depth", 1, 1_000_000)
         chunk_size = p.integer("chunk_size", 1024, 1 << 30)
@@ -143,19 +150,28 @@ class BagRecorder(Node):
             except Exception as exc:  # noqa: BLE001 - rclpy raises several types for bad names
                 raise ParameterError("topics", f"{plan.name!r} is not a valid topic name ({exc})") from None
         path = Path(output).expanduser() if output else default_output()
+        self.done = Future()
+        self.exit_code = 0
+        self.executor_kind = "events"
         try:
             self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
                                     compression=compression)
         except BagWriteError as exc:
             raise ParameterError("output", str(exc)) from None
-        self.done = Future()
-        self.exit_code = 0
-        self.executor_kind = "events"
-        for plan, topic in zip(plans, resolved, strict=True):
-            qos = latched_qos() if plan.latched else stream_qos(depth)
-            channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
-            self.create_subscription(plan.msg_class, topic, self._callback(channel), qos, raw=True)
-        self.create_timer(flush_period, self._flush_if_due)
+        try:
+            for plan, topic in zip(plans, resolved, strict=True):
+                qos = latched_qos() if plan.latched else stream_qos(depth)
+                channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
+                self.create_subscription(plan.msg_class, topic, self._callback(channel), qos, raw=True)
+            self.create_timer(flush_period, self._flush_if_due)
+        except BagWriteError as exc:
+            self.writer.abort()
+            raise ParameterError("output", str(exc)) from None
+        except BaseException:  # a signal during start-up: leave a complete (empty) bag
+            self.finish()
+            raise
+        debug = self.get_logger().debug
+        self.writer.on_chunk = lambda n: debug(f"chunk closed: {n} messages on disk")
         self.get_logger().info(
             f"recording {', '.join(resolved)} to {path} (depth {depth}, {compression} chunks of "
             f"<= {chunk_size} B or {flush_period} s)")
@@ -185,15 +201,22 @@ class BagRecorder(Node):
 
     def finish(self) -> int:
         """Close the file (summary, statistics); the exit code of the run."""
+        if self.writer.closed:
+            return self.exit_code
         # After SIGINT/SIGTERM the context is gone: the node's logger would fail to reach
         # /rosout (an rcl error line), so log through a plain logger then.
         log = self.get_logger() if self.context.ok() else rclpy.logging.get_logger("bag_recorder.close")
+        # A second SIGINT/SIGTERM must not cut the summary short: closing takes milliseconds.
+        held = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             self.writer.close()
         except BagWriteError as exc:
             if self.exit_code == 0:
                 log.error(str(exc))
             return EXIT_WRITE_FAILED
+        finally:
+            for s, handler in held.items():
+                signal.signal(s, handler)
         counts = ", ".join(f"{t} {n}" for t, n in self.writer.counts().items())
         log.info(f"wrote {self.writer.message_count} messages to {self.writer.path} "
                                f"({counts})")
@@ -202,13 +225,26 @@ class BagRecorder(Node):
 
 def run(args: list[str] | None = None) -> int:
     """Record until SIGINT/SIGTERM (exit 0), a write failure (1) or a bad parameter (2)."""
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except _rclpy.RCLError as exc:  # an unreadable --params-file or malformed --ros-args
+        print(f"[ERROR] [bag_recorder]: invalid arguments: {exc}", file=sys.stderr)
+        return EXIT_BAD_PARAMETER
     node = None
     try:
         try:
             node = BagRecorder()
         except ParameterError as exc:
             rclpy.logging.get_logger("bag_recorder").error(str(exc))
+            return EXIT_BAD_PARAMETER
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return 0  # stopped during start-up (a file, if created, was closed complete)
+        except Exception as exc:
+            if not rclpy.ok():  # SIGINT/SIGTERM during start-up: rcl calls fail, a normal stop
+                return 0
+            if not isinstance(exc, _rclpy.RCLError):
+                raise
+            rclpy.logging.get_logger("bag_recorder").error(f"cannot start: {exc}")
             return EXIT_BAD_PARAMETER
         try:
             spin(node, make_executor(node.executor_kind), done=node.done)
@@ -222,7 +258,11 @@ def run(args: list[str] | None = None) -> int:
 
 
 def main() -> None:
-    sys.exit(run(sys.argv))
+    try:
+        code = run(sys.argv)
+    except KeyboardInterrupt:  # SIGINT before rclpy's handlers exist: nothing was recorded
+        code = 130
+    sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -118,6 +118,13 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
         except ParameterError as exc:
             rclpy.logging.get_logger(name).error(str(exc))
             return EXIT_BAD_PARAMETER
+        except Exception as exc:
+            if not rclpy.ok():  # SIGINT/SIGTERM during start-up: rcl calls fail, a normal stop
+                return 0
+            if not isinstance(exc, _rclpy.RCLError):
+                raise
+            rclpy.logging.get_logger(name).error(f"cannot start: {exc}")  # e.g. a remap clash
+            return EXIT_BAD_PARAMETER
         executor = make_executor(getattr(node, "executor_kind", "events"))
         spin(node, executor, done=getattr(node, "done", None))
         return getattr(node, "exit_code", 0)

@@ -1,6 +1,7 @@
 """Pipeline statistics for /diagnostics: rates, compute time, latency, rejections.
 
 compute = callback entry to publish() returned (validation, estimation, RNEA, publish);
+publish = the part of it spent inside publish() (the DDS write, synchronous);
 latency = receive time (system clock) - header stamp, i.e. one-way from the publisher
 when both run on this machine. Both are per period (p50, p99, max).
 
@@ -28,6 +29,7 @@ class PipelineStats:
         self.resets: dict[str, int] = {"stamp_gap": 0, "stamp_jump_back": 0}
         self._compute_ns = np.zeros(window, dtype=np.int64)
         self._latency_ns = np.zeros(window, dtype=np.int64)
+        self._publish_ns = np.zeros(window, dtype=np.int64)
         self._n = 0  # samples recorded this period
         self._window = window
         self._period_start = time.monotonic()
@@ -35,10 +37,11 @@ class PipelineStats:
         self._published_at_start = 0
         self._rejected_at_start = 0
 
-    def record(self, compute_ns: int, latency_ns: int) -> None:
+    def record(self, compute_ns: int, latency_ns: int, publish_ns: int = 0) -> None:
         i = self._n % self._window
         self._compute_ns[i] = compute_ns
         self._latency_ns[i] = latency_ns
+        self._publish_ns[i] = publish_ns
         self._n += 1
 
     def status(self, name: str, hardware_id: str = "") -> DiagnosticStatus:
@@ -53,14 +56,18 @@ class PipelineStats:
         if n:
             c50, c99, cmax = np.percentile(self._compute_ns[:n], (50, 99, 100)) / 1e3
             l50, l99, lmax = np.percentile(self._latency_ns[:n], (50, 99, 100)) / 1e3
+            p50, p99, pmax = np.percentile(self._publish_ns[:n], (50, 99, 100)) / 1e3
         else:
-            c50 = c99 = cmax = l50 = l99 = lmax = float("nan")
+            c50 = c99 = cmax = l50 = l99 = lmax = p50 = p99 = pmax = float("nan")
         values = {
             "input_rate_hz": f"{in_rate:.1f}",
             "output_rate_hz": f"{out_rate:.1f}",
             "compute_us_p50": f"{c50:.1f}",
             "compute_us_p99": f"{c99:.1f}",
             "compute_us_max": f"{cmax:.1f}",
+            "publish_us_p50": f"{p50:.1f}",
+            "publish_us_p99": f"{p99:.1f}",
+            "publish_us_max": f"{pmax:.1f}",
             "latency_us_p50": f"{l50:.1f}",
             "latency_us_p99": f"{l99:.1f}",
             "latency_us_max": f"{lmax:.1f}",

@@ -80,15 +80,16 @@ class _Differentiator:
     def update(self, x: np.ndarray, dt: float) -> None:
         """Feed sample x taken dt s after the previous one (dt ignored for the first)."""
         if self.has_prev:
-            np.subtract(x, self._prev, out=self._raw)
-            self._raw *= 1.0 / dt
             if self.valid and self.tau > 0.0:
+                np.subtract(x, self._prev, out=self._raw)
+                self._raw *= 1.0 / dt
                 a = dt / (self.tau + dt)
                 self._raw -= self.out
                 self._raw *= a
                 self.out += self._raw
-            else:
-                self.out[:] = self._raw
+            else:  # no filter (or its first value): the difference straight into out
+                np.subtract(x, self._prev, out=self.out)
+                self.out *= 1.0 / dt
             self.valid = True
         np.copyto(self._prev, x)
         self.has_prev = True

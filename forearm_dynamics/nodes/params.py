@@ -96,6 +96,20 @@ class Params:
             raise ParameterError(name, f"{v!r} is not a valid topic name ({exc})") from None
         return v
 
+    def distinct_topics(self, names: Sequence[str], reserved: dict[str, str] | None = None) -> None:
+        """Refuse two of these topic parameters naming one topic, or one naming a topic the
+        node uses for something else (`reserved`: topic -> what it is for): the node would
+        subscribe to its own output, or rcl would refuse a second type on the topic."""
+        seen: dict[str, str] = {}
+        for topic, what in (reserved or {}).items():
+            seen[self._node.resolve_topic_name(topic)] = what
+        for name in names:
+            resolved = self._node.resolve_topic_name(self.string(name))
+            if resolved in seen:
+                raise ParameterError(name, f"{self.raw(name)!r} is {resolved}, already the "
+                                     f"{seen[resolved]}; it must be a topic of its own")
+            seen[resolved] = f"topic of '{name}'"
+
     # -- runtime changes -----------------------------------------------------------------
     def refuse_changes(self, allowed: Callable[[Parameter], bool] | None = None) -> None:
         """Reject runtime set_parameters: values are read once at start-up."""

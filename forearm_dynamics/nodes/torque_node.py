@@ -132,6 +132,7 @@ class TorqueNode(JointStreamNode):
         warm = est.update(t_ns, self.q, self.qd, velocity_given)
         tau = pin.rnea(self._pin_model, self._pin_data, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
+            est.reset()  # it has taken in the absurd sample: the next one starts afresh
             raise v.Rejection(v.NON_FINITE_TORQUE, "torque overflowed (absurd inputs?)")
         np.copyto(self.effort, tau)
         return warm

@@ -2,10 +2,22 @@
 
 A rejected sample is dropped, counted under its reason and warned about (rate-limited);
 the node keeps running and the next good sample is processed normally.
+
+Stamp jumps (stream_node.py) are judged against this node's system clock only in the rare
+branch where a sample jumps by more than max_stamp_gap (or is the first one):
+- more than FUTURE_TOLERANCE_S ahead of the clock -> rejected (stamp_in_future): a corrupt
+  stamp or unsynchronised clocks, never a pause. Rejected samples do not become the
+  reference, so the good stream continues with its history intact.
+- a jump back while the previous sample was live (its stamp within LIVE_WINDOW_S of the
+  clock) to a stamp older than LIVE_WINDOW_S -> rejected (stamp_not_increasing): a live
+  source cannot go back in time. A replayed source (stamps older than that) jumping back
+  is a restart (bag loop): accepted, estimator reset. Nothing here can lock a stream out:
+  a sample is only refused against a reference that is itself close to the clock.
 """
 
 from __future__ import annotations
 
+import time
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -21,6 +33,18 @@ NON_FINITE = "non_finite"  # NaN/inf in a position or velocity the model uses
 STAMP_MISSING = "stamp_missing"  # header.stamp is zero: nothing to differentiate against
 STAMP_NOT_INCREASING = "stamp_not_increasing"  # equal to or (slightly) before the last one
 NON_FINITE_TORQUE = "non_finite_torque"  # finite inputs but absurd values overflowed
+TOO_MANY_NAMES = "too_many_names"  # more than MAX_NAMES names (bounded work and memory)
+STAMP_INVALID = "stamp_invalid"  # negative, or nanosec outside [0, 1e9)
+STAMP_IN_FUTURE = "stamp_in_future"  # more than FUTURE_TOLERANCE_S ahead of this node's clock
+
+#: Names a message may carry (the model's 20 and others, ignored). A real robot has tens;
+#: the limit bounds the per-message work and the name-list cache (16 lists) at ~1 MB.
+MAX_NAMES = 1024
+#: A stamp this far ahead of the node's system clock is refused (see the module docstring).
+#: Generous, so that two machines' clocks a little apart never lock a stream out.
+FUTURE_TOLERANCE_S = 60.0
+#: A previous stamp within this of the clock marks the stream as live (see the docstring).
+LIVE_WINDOW_S = 1.0
 
 REASONS = (
     EMPTY,
@@ -31,6 +55,9 @@ REASONS = (
     STAMP_MISSING,
     STAMP_NOT_INCREASING,
     NON_FINITE_TORQUE,
+    TOO_MANY_NAMES,
+    STAMP_INVALID,
+    STAMP_IN_FUTURE,
 )
 
 
@@ -64,6 +91,8 @@ class NameMatcher:
     def match(self, names: list[str]) -> np.ndarray:
         """Index array for `names`, or raise Rejection."""
         if names != self._last_names:
+            if len(names) > MAX_NAMES:  # before any copy: never cached
+                raise Rejection(TOO_MANY_NAMES, f"{len(names)} names (at most {MAX_NAMES})")
             key = tuple(names)
             found = self._cache.get(key)
             if found is None:
@@ -101,3 +130,37 @@ class NameMatcher:
         """Which joints hold NaN/inf (slow path, only for the warning text)."""
         bad = [self.joint_names[i] for i in np.flatnonzero(~np.isfinite(values))]
         return f"{field} of {bad[:5]}" + (" ..." if len(bad) > 5 else "") if bad else field
+
+
+# -- stamps (called by stream_node only on its rare paths) ------------------------------------
+def bad_stamp(sec: int, nanosec: int) -> Rejection:
+    """Why a stamp that is zero, negative or has nanosec >= 1e9 is refused."""
+    if sec == 0 and nanosec == 0:
+        return Rejection(STAMP_MISSING, "header.stamp is zero")
+    return Rejection(STAMP_INVALID, f"header.stamp sec={sec} nanosec={nanosec} is not a valid time")
+
+
+def check_jump(t_ns: int, last_ns: int | None) -> None:
+    """A first sample, or one more than max_stamp_gap from the previous: raise if impossible."""
+    now = time.time_ns()
+    ahead = t_ns - now
+    if ahead > FUTURE_TOLERANCE_S * 1e9:
+        raise Rejection(STAMP_IN_FUTURE, f"header.stamp is {ahead / 1e9:.1f} s ahead of this node's "
+                        f"clock (> {FUTURE_TOLERANCE_S:g} s): corrupt stamp or clocks not synchronised")
+    live = LIVE_WINDOW_S * 1e9
+    if last_ns is not None and t_ns < last_ns and abs(now - last_ns) < live and now - t_ns > live:
+        raise Rejection(STAMP_NOT_INCREASING, f"stamp {(last_ns - t_ns) / 1e9:.3f} s before the "
+                        "previous sample of a live stream")
+
+
+def flush_suppressed(warned: dict[str, tuple[float, int]], logger, every_s: float) -> None:
+    """Log the rejections a rate-limited warning held back, once its window has passed.
+
+    `warned` maps reason -> (monotonic time of the last warning, rejections suppressed since).
+    """
+    now = time.monotonic()
+    for reason, (last, suppressed) in list(warned.items()):
+        if suppressed and now - last >= every_s:
+            logger.warning(f"rejected sample [{reason}]: {suppressed} more in the last "
+                           f"{now - last:.1f} s (counts in /diagnostics)")
+            warned[reason] = (now, 0)

@@ -1,0 +1,273 @@
+"""Parameters of every node (torque_node, trajectory_publisher, null_echo_node,
+bag_recorder), as real processes: every parameter has invalid values that are refused at
+start (exit 2, the parameter named, no traceback), and runtime changes are refused clearly
+(all at once: set_parameters and set_parameters_atomically), leaving every value as it was
+and the node working. test_torque_node.py / test_trajectory_publisher.py /
+test_bag_recorder.py already check a few values; this file covers every parameter.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from pathlib import Path
+
+import rosproc
+from faultkit import MS, Procs, joint_state, private_domain, stamp_of
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.srv import (
+    GetParameters,
+    ListParameters,
+    SetParameters,
+    SetParametersAtomically,
+)
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from forearm_dynamics.nodes import bag_recorder, trajectory_publisher
+from forearm_dynamics.nodes.common import stream_qos
+from forearm_dynamics.nodes.stream_node import STREAM_SPECS
+from forearm_dynamics.nodes.torque_node import TorqueNode
+
+SPECS = {
+    "torque_node": TorqueNode.specs,
+    "trajectory_publisher": trajectory_publisher.SPECS,
+    "null_echo_node": STREAM_SPECS,
+    "bag_recorder": bag_recorder.SPECS,
+}
+
+# (node, [-p assignments], the parameter the error must name)
+INVALID = [
+    ("torque_node", ["model:=5"], "model"),
+    ("torque_node", ["model:=''"], "model"),
+    ("torque_node", ["body_size:=fifty"], "body_size"),
+    ("torque_node", ["body_size:=50.5"], "body_size"),
+    ("torque_node", ["stature:=-1.0"], "stature"),
+    ("torque_node", ["stature:=.nan", "body_mass:=80.0"], "stature"),
+    ("torque_node", ["body_mass:=80.0"], "stature"),  # custom size: stature (or lengths) needed
+    ("torque_node", ["body_mass:=500.0", "stature:=1.8"], "body_mass"),
+    ("torque_node", ["forearm_length:=2.0", "body_mass:=80.0", "stature:=1.8"], "forearm_length"),
+    ("torque_node", ["hand_length:=long"], "hand_length"),
+    ("torque_node", ["hand_breadth:=-0.1"], "hand_breadth"),
+    ("torque_node", ["split:=1.5"], "split"),
+    ("torque_node", ["split:=.inf"], "split"),
+    ("torque_node", ["split:=half"], "split"),
+    ("torque_node", ["estimator.accel_cutoff_hz:=.nan"], "estimator.accel_cutoff_hz"),
+    ("torque_node", ["estimator.velocity_cutoff_hz:=-1.0"], "estimator.velocity_cutoff_hz"),
+    ("torque_node", ["estimator.velocity_cutoff_hz:=abc"], "estimator.velocity_cutoff_hz"),
+    ("torque_node", ["input_topic:=''"], "input_topic"),
+    ("torque_node", ["input_topic:=7"], "input_topic"),
+    ("torque_node", ["output_topic:=joint_states"], "output_topic"),  # its own input
+    ("torque_node", ["output_topic:=/diagnostics"], "output_topic"),
+    ("torque_node", ["input_topic:=torque_node/config"], "input_topic"),
+    ("torque_node", ["output_topic:=bad//name"], "output_topic"),
+    ("torque_node", ["qos_depth:=1.5"], "qos_depth"),
+    ("torque_node", ["qos_depth:=200000"], "qos_depth"),
+    ("torque_node", ["qos_reliable:=yes_please"], "qos_reliable"),
+    ("torque_node", ["qos_reliable:=1"], "qos_reliable"),
+    ("torque_node", ["executor:=3"], "executor"),
+    ("torque_node", ["diagnostics_period:=-1.0"], "diagnostics_period"),
+    ("torque_node", ["diagnostics_period:=.nan"], "diagnostics_period"),
+    ("torque_node", ["max_stamp_gap:=0.0"], "max_stamp_gap"),
+    ("torque_node", ["max_stamp_gap:=.inf"], "max_stamp_gap"),
+    ("trajectory_publisher", ["movements:=[1.5]"], "movements"),
+    ("trajectory_publisher", ["movements:=[]"], "movements"),
+    ("trajectory_publisher", ["movements:=1"], "movements"),
+    ("trajectory_publisher", ["movements:=[1,true]"], "movements"),
+    ("trajectory_publisher", ["body_size:=fifty"], "body_size"),
+    ("trajectory_publisher", ["rate_hz:=.nan"], "rate_hz"),
+    ("trajectory_publisher", ["rate_hz:=20000.0"], "rate_hz"),
+    ("trajectory_publisher", ["rate_hz:=fast"], "rate_hz"),
+    ("trajectory_publisher", ["loop:=1"], "loop"),
+    ("trajectory_publisher", ["start_delay:=-1.0"], "start_delay"),
+    ("trajectory_publisher", ["subscriber_timeout:=.inf"], "subscriber_timeout"),
+    ("trajectory_publisher", ["min_subscribers:=-1"], "min_subscribers"),
+    ("trajectory_publisher", ["min_subscribers:=1.5"], "min_subscribers"),
+    ("trajectory_publisher", ["gap:=-0.1"], "gap"),
+    ("trajectory_publisher", ["drain:=.nan"], "drain"),
+    ("trajectory_publisher", ["output_topic:=bad topic"], "output_topic"),
+    ("trajectory_publisher", ["marker_topic:=joint_states"], "marker_topic"),  # 2 types, 1 topic
+    ("trajectory_publisher", ["qos_depth:=0"], "qos_depth"),
+    ("trajectory_publisher", ["qos_reliable:=no_way"], "qos_reliable"),
+    ("trajectory_publisher", ["executor:=multi"], "executor"),
+    ("null_echo_node", ["input_topic:=~/x y"], "input_topic"),
+    ("null_echo_node", ["output_topic:=/joint_states"], "output_topic"),
+    ("null_echo_node", ["qos_depth:=-3"], "qos_depth"),
+    ("null_echo_node", ["qos_reliable:=2"], "qos_reliable"),
+    ("null_echo_node", ["executor:=''"], "executor"),
+    ("null_echo_node", ["diagnostics_period:=often"], "diagnostics_period"),
+    ("null_echo_node", ["max_stamp_gap:=.nan"], "max_stamp_gap"),
+    ("bag_recorder", ["topics:=joint_states"], "topics"),
+    ("bag_recorder", ["topics:=[joint_states,joint_states]"], "topics"),
+    ("bag_recorder", ['topics:=["x:foo/msg/Nope"]'], "topics"),
+    ("bag_recorder", ['topics:=["bad topic:std_msgs/msg/String"]'], "topics"),
+    ("bag_recorder", ["topics:=[x:foo/msg/Nope]"], "topics"),  # unquoted: rcl's YAML refuses it
+    ("bag_recorder", ["latched_topics:=5"], "latched_topics"),
+    ("bag_recorder", ['latched_topics:=[""]'], "latched_topics"),
+    ("bag_recorder", ["output:=42"], "output"),
+    ("bag_recorder", ["output:=/tmp"], "output"),  # a directory
+    ("bag_recorder", ["qos_depth:=0"], "qos_depth"),
+    ("bag_recorder", ["chunk_size:=10"], "chunk_size"),
+    ("bag_recorder", ["chunk_size:=1.5"], "chunk_size"),
+    ("bag_recorder", ["flush_period:=0.0"], "flush_period"),
+    ("bag_recorder", ["flush_period:=.nan"], "flush_period"),
+    ("bag_recorder", ["compression:=gzip"], "compression"),
+]
+
+
+def test_the_matrix_covers_every_parameter() -> None:
+    """A parameter added without an invalid-value case here fails this test."""
+    covered = {(node, name) for node, _args, name in INVALID}
+    missing = [(node, s.name) for node, specs in SPECS.items() for s in specs
+               if (node, s.name) not in covered]
+    assert not missing, missing
+
+
+def _judge(node: str, args: list[str], name: str, p: rosproc.NodeProcess) -> str:
+    code = p.wait(timeout=30)
+    out = p.output()
+    lines = [ln for ln in out.splitlines() if ln.strip()]
+    assert code == 2, (node, args, out)
+    assert "Traceback" not in out, out
+    # one line of ours; rcl prints one more of its own when it cannot parse the override
+    assert len(lines) == 1 or (len(lines) == 2 and "[rcl]" in lines[0]), lines
+    assert f"invalid parameter '{name}'" in lines[-1] or \
+        ("invalid arguments" in lines[-1] and f"-p {name}:=" in lines[-1]), (node, args, lines)
+    return lines[-1].split("]: ", 1)[-1]
+
+
+def test_every_invalid_value_is_refused_at_start(tmp_path) -> None:
+    procs = Procs()
+    domain = private_domain()
+    results = []
+    try:
+        for i in range(0, len(INVALID), 8):  # 8 at a time: 2 cores are shared
+            batch = [(node, args, name, procs.start(
+                node, *[x for a in args for x in ("-p", a)],
+                *(["-p", f"output:={tmp_path / f'never_{i + k}.mcap'}"]
+                  if node == "bag_recorder" and name != "output" else []),
+                domain=domain)) for k, (node, args, name) in enumerate(INVALID[i:i + 8])]
+            results += [(node, args, _judge(node, args, name, p)) for node, args, name, p in batch]
+    finally:
+        procs.close()
+    assert not list(tmp_path.glob("never_*.mcap"))  # a refused recorder creates no file
+    print("\n".join(f"{node} {' '.join(args)}: {line}" for node, args, line in results))
+
+
+def test_bad_params_file_and_typos(tmp_path) -> None:
+    bad_yaml = tmp_path / "bad.yaml"
+    bad_yaml.write_text("torque_node:\n  ros__parameters:\n    model: [unclosed\n")
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text("/**:\n  ros__parameters:\n    qos_depth: many\n")
+    procs = Procs()
+    domain = private_domain()
+    try:
+        missing = procs.start("torque_node", "--params-file", str(tmp_path / "nope.yaml"), domain=domain)
+        broken = procs.start("torque_node", "--params-file", str(bad_yaml), domain=domain)
+        typed = procs.start("bag_recorder", "--params-file", str(wrong), domain=domain)
+        typo = procs.start("null_echo_node", "-p", "qos_dpeth:=10", domain=domain)
+        for p in (missing, broken):
+            assert p.wait(30) == 2, p.output()
+            assert "invalid arguments" in p.output() and "Traceback" not in p.output()
+        assert typed.wait(30) == 2 and "invalid parameter 'qos_depth'" in typed.output()
+        # an unknown name is likely a typo: named in a warning, the node runs on
+        assert typo.wait_for_output("ignoring unknown parameter 'qos_dpeth'", 30), typo.output()
+        assert typo.running()
+        assert typo.stop(signal.SIGINT) == 0
+    finally:
+        procs.close()
+
+
+# -- runtime changes -----------------------------------------------------------------------------
+def _call(peer: rosproc.Peer, srv_type, name: str, request, timeout: float = 15.0):
+    client = peer.node.create_client(srv_type, name)
+    try:
+        assert client.wait_for_service(timeout_sec=timeout), f"no service {name}"
+        future = client.call_async(request)
+        assert peer.spin_until(future.done, timeout), f"{name}: no answer"
+        return future.result()
+    finally:
+        peer.node.destroy_client(client)
+
+
+def _values(peer, node: str) -> dict[str, ParameterMsg]:
+    names = _call(peer, ListParameters, f"/{node}/list_parameters",
+                  ListParameters.Request()).result.names
+    got = _call(peer, GetParameters, f"/{node}/get_parameters", GetParameters.Request(names=names))
+    return dict(zip(names, got.values, strict=True))
+
+
+def _changed(name: str, value) -> ParameterMsg:
+    """A different value of the same type (the node refuses any change anyway)."""
+    v = Parameter.from_parameter_msg(ParameterMsg(name=name, value=value)).value
+    if isinstance(v, bool):
+        new = not v
+    elif isinstance(v, (int, float)):
+        new = v + 1
+    elif isinstance(v, str):
+        new = v + "_changed"
+    elif isinstance(v, list) and v:
+        new = v[:-1] if len(v) > 1 else v * 2
+    else:
+        new = v
+    return Parameter(name, value=new).to_parameter_msg()
+
+
+def test_runtime_changes_are_refused_and_change_nothing(tmp_path) -> None:
+    domain = private_domain()
+    procs = Procs()
+    peer = rosproc.Peer("param_fault_peer", domain=domain)
+    try:
+        bag = tmp_path / "runtime.mcap"
+        nodes = {
+            "torque_node": procs.start("torque_node", domain=domain),
+            "null_echo_node": procs.start("null_echo_node", "-r", "joint_torques:=null_torques",
+                                          domain=domain),
+            "bag_recorder": procs.start("bag_recorder", "-p", f"output:={bag}", domain=domain),
+            "trajectory_publisher": procs.start("trajectory_publisher", "-p", "start_delay:=3600.0",
+                                                domain=domain),
+        }
+        report = []
+        for node, p in nodes.items():
+            before = _values(peer, node)
+            changes = [_changed(n, v) for n, v in before.items()]
+            res = _call(peer, SetParameters, f"/{node}/set_parameters",
+                        SetParameters.Request(parameters=changes)).results
+            assert len(res) == len(changes)
+            for change, r in zip(changes, res, strict=True):
+                assert not r.successful, (node, change.name)
+                assert change.name in r.reason or "read-only" in r.reason, (node, change.name, r.reason)
+            own = [c for c in changes if c.name in {s.name for s in SPECS[node]}][:3]
+            atomic = _call(peer, SetParametersAtomically, f"/{node}/set_parameters_atomically",
+                           SetParametersAtomically.Request(parameters=own)).result
+            assert not atomic.successful and "start-up only" in atomic.reason, (node, atomic.reason)
+            undeclared = _call(peer, SetParameters, f"/{node}/set_parameters", SetParameters.Request(
+                parameters=[Parameter("no_such_parameter", value=1).to_parameter_msg()])).results[0]
+            assert not undeclared.successful
+            assert _values(peer, node) == before, f"{node}: a refused change changed something"
+            assert p.running()
+            report.append(f"{node}: {len(changes)} parameters, every change refused "
+                          f"(e.g. {res[0].reason!r}); atomic: {atomic.reason!r}")
+        # and they still work: the torque node answers, the recorder records it
+        pub = peer.node.create_publisher(JointState, "joint_states", stream_qos(100))
+        got: list[JointState] = []
+        peer.node.create_subscription(JointState, "joint_torques", got.append, stream_qos(100))
+        t = time.time_ns()
+        deadline = time.monotonic() + 30
+        while not got:
+            assert time.monotonic() < deadline, nodes["torque_node"].output()
+            t += MS
+            pub.publish(joint_state(t))
+            peer.spin_for(0.1)
+        assert stamp_of(got[-1]) <= t
+        for node, p in nodes.items():
+            assert p.stop(signal.SIGINT) == 0, (node, p.output())
+            assert "Traceback" not in p.output()
+        from forearm_dynamics.bag import open_bag
+
+        counts = open_bag(Path(bag)).info.topic_counts()
+        assert counts["/joint_torques"] >= 1 and counts["/joint_states"] >= 1
+        print("\n".join(report))
+    finally:
+        peer.close()
+        procs.close()
