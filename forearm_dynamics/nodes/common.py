@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import array
+import gc
 import sys
 from collections.abc import Callable
 from importlib import metadata
 
-import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -42,18 +41,6 @@ def stream_qos(depth: int = 100, reliable: bool = True) -> QoSProfile:
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
         durability=DurabilityPolicy.VOLATILE,
     )
-
-
-def float_field(msg, field: str, n: int) -> np.ndarray:
-    """Give msg.<field> (float64[]) n zeros and return a writable numpy view of what the
-    message stores: write the view, publish the message, nothing is allocated per sample.
-
-    The view is taken from the field after assignment because the generated setter keeps
-    an array.array as is only when field checks are on (ROS_PYTHON_CHECK_FIELDS=1) and
-    copies it otherwise.
-    """
-    setattr(msg, field, array.array("d", bytes(8 * n)))
-    return np.frombuffer(getattr(msg, field), dtype=np.float64)
 
 
 def make_executor(kind: str = "events"):
@@ -126,6 +113,10 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
             rclpy.logging.get_logger(name).error(f"cannot start: {exc}")  # e.g. a remap clash
             return EXIT_BAD_PARAMETER
         executor = make_executor(getattr(node, "executor_kind", "events"))
+        # Start-up objects (modules, model, messages) live as long as the process: freeze
+        # them so a full garbage collection never walks them while streaming at 1 kHz.
+        gc.collect()
+        gc.freeze()
         spin(node, executor, done=getattr(node, "done", None))
         return getattr(node, "exit_code", 0)
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -1,7 +1,8 @@
 """Pipeline statistics for /diagnostics: rates, compute time, latency, rejections.
 
 compute = callback entry to publish() returned (validation, estimation, RNEA, publish);
-publish = the part of it spent inside publish() (the DDS write, synchronous);
+publish = the part of it spent inside publish() (the DDS write, synchronous); own =
+compute - publish per sample (what the node itself does: validation, estimation, RNEA);
 latency = receive time (system clock) - header stamp, i.e. one-way from the publisher
 when both run on this machine. Both are per period (p50, p99, max).
 
@@ -57,8 +58,11 @@ class PipelineStats:
             c50, c99, cmax = np.percentile(self._compute_ns[:n], (50, 99, 100)) / 1e3
             l50, l99, lmax = np.percentile(self._latency_ns[:n], (50, 99, 100)) / 1e3
             p50, p99, pmax = np.percentile(self._publish_ns[:n], (50, 99, 100)) / 1e3
+            own = self._compute_ns[:n] - self._publish_ns[:n]
+            o50, o99, omax = np.percentile(own, (50, 99, 100)) / 1e3
         else:
             c50 = c99 = cmax = l50 = l99 = lmax = p50 = p99 = pmax = float("nan")
+            o50 = o99 = omax = float("nan")
         values = {
             "input_rate_hz": f"{in_rate:.1f}",
             "output_rate_hz": f"{out_rate:.1f}",
@@ -68,6 +72,9 @@ class PipelineStats:
             "publish_us_p50": f"{p50:.1f}",
             "publish_us_p99": f"{p99:.1f}",
             "publish_us_max": f"{pmax:.1f}",
+            "own_us_p50": f"{o50:.1f}",
+            "own_us_p99": f"{o99:.1f}",
+            "own_us_max": f"{omax:.1f}",
             "latency_us_p50": f"{l50:.1f}",
             "latency_us_p99": f"{l99:.1f}",
             "latency_us_max": f"{lmax:.1f}",

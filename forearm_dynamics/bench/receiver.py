@@ -1,0 +1,96 @@
+"""Benchmark receiver: receive time and header stamp of every message on one stamped topic.
+
+    python -m forearm_dynamics.bench.receiver --topic joint_torques --out rx.npz \
+        [--diag-prefix torque_node] [--depth 1000] [--best-effort]
+
+A raw subscription (the CDR bytes, no deserialisation): the callback reads the stamp at
+bytes 4..12 (after the 4-byte encapsulation header, every std_msgs/Header-first message)
+and the system clock, and appends both to array buffers, so the receiver costs the same
+whichever node is measured. /diagnostics statuses whose name starts with --diag-prefix are
+kept too (the node's own callback-time percentiles). Prints `receiver: matched` once a
+publisher on --topic is matched; SIGINT/SIGTERM write --out (.npz: recv_ns, stamp_ns) and
+--out with .diag.json (list of {t, values}) and exit 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import struct
+import sys
+import time
+from array import array
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+
+from ..nodes.common import make_executor, spin, stream_qos
+
+
+class Receiver:
+    def __init__(self, node, topic: str, depth: int, reliable: bool, diag_prefix: str):
+        self.node = node
+        self.recv_ns = array("q")
+        self.stamp_ns = array("q")
+        self.diag: list[dict] = []
+        self._prefix = diag_prefix
+        self._matched = False
+        unpack, now = struct.Struct("<iI").unpack_from, time.time_ns
+        recv_append, stamp_append = self.recv_ns.append, self.stamp_ns.append
+
+        def on_message(data: bytes) -> None:
+            t = now()
+            sec, nsec = unpack(data, 4)
+            recv_append(t)
+            stamp_append(sec * 1_000_000_000 + nsec)
+
+        self.sub = node.create_subscription(
+            JointState, topic, on_message,
+            stream_qos(depth, reliable), raw=True)
+        if diag_prefix:
+            node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 100)
+        node.create_timer(0.05, self._check_matched)
+
+    def _on_diag(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.startswith(self._prefix):
+                self.diag.append({"t": time.time(), "name": status.name,
+                                  "values": {kv.key: kv.value for kv in status.values}})
+
+    def _check_matched(self) -> None:
+        if not self._matched and self.sub.get_publisher_count() > 0:
+            self._matched = True
+            print("receiver: matched", flush=True)
+
+    def save(self, out: Path) -> None:
+        np.savez(out, recv_ns=np.frombuffer(self.recv_ns, dtype=np.int64),
+                 stamp_ns=np.frombuffer(self.stamp_ns, dtype=np.int64))
+        out.with_suffix(".diag.json").write_text(json.dumps(self.diag))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="bench.receiver")
+    ap.add_argument("--topic", default="joint_torques")
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--diag-prefix", default="")
+    ap.add_argument("--depth", type=int, default=1000)
+    ap.add_argument("--best-effort", action="store_true")
+    args, ros_args = ap.parse_known_args(argv)
+    rclpy.init(args=ros_args)
+    node = rclpy.create_node("bench_receiver")
+    rx = Receiver(node, args.topic, args.depth, not args.best_effort, args.diag_prefix)
+    try:
+        spin(node, make_executor("events"))
+    finally:
+        rx.save(args.out)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    print(f"receiver: {len(rx.recv_ns)} messages", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
