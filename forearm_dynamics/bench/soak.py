@@ -45,20 +45,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..rosenv import ros_env
+
 BIN = Path(sys.executable).parent
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 PROCESSES = ("torque_node", "bag_recorder", "trajectory_publisher")
 TAIL_GRACE_NS = 500_000_000
 
 
-def ros_env(domain: int, log_dir: Path) -> dict[str, str]:
-    """Loopback-only DDS in `domain` for a child; the wheels' bootstrap is not inherited."""
-    drop = ("ROS_", "RMW_", "FASTRTPS", "FASTDDS", "LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP")
-    env = {k: v for k, v in os.environ.items() if not k.startswith(drop)}
-    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(log_dir), HOME=os.environ.get("HOME") or tempfile.gettempdir(),
-               PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
-    return env
 
 
 class Child:

@@ -14,23 +14,15 @@ import os
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
+from ..rosenv import ros_env
 from .common import die
 
 BIN = Path(sys.executable).parent
 
 
-def ros_env(domain: int, log_dir: Path) -> dict[str, str]:
-    """Children get loopback-only DDS in our domain; wheel bootstrap state is not inherited."""
-    drop = ("ROS_", "RMW_", "LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP")
-    env = {k: v for k, v in os.environ.items() if not k.startswith(drop)}
-    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(log_dir), HOME=os.environ.get("HOME") or tempfile.gettempdir(),
-               PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
-    return env
 
 
 class Child:

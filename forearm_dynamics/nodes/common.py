@@ -25,9 +25,10 @@ EXIT_BAD_PARAMETER = 2
 EXECUTORS = ("events", "single")
 
 
-def latched_qos() -> QoSProfile:
+def latched_qos(depth: int = 1) -> QoSProfile:
+    """Reliable and transient local: a subscriber that joins late still gets the last `depth`."""
     return QoSProfile(
-        depth=1,
+        depth=depth,
         history=HistoryPolicy.KEEP_LAST,
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL,

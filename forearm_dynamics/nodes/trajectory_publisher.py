@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -35,7 +35,7 @@ from std_msgs.msg import String
 from ..anthropometry import resolve_body_size
 from ..description import JOINT_NAMES
 from ..movements import Movement, get_movement, movement_library
-from .common import EXECUTORS, main_for, stream_qos
+from .common import EXECUTORS, latched_qos, main_for, stream_qos
 from .jointstate_cdr import OutputTemplate
 from .params import ParameterError, Params, Spec
 
@@ -110,12 +110,7 @@ class ReplaySettings:
 
 def marker_qos() -> QoSProfile:
     """Reliable and transient local: a recorder that joins late still gets the markers."""
-    return QoSProfile(
-        depth=100,
-        history=HistoryPolicy.KEEP_LAST,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL,
-    )
+    return latched_qos(depth=100)
 
 
 class TrajectoryPublisher(Node):
