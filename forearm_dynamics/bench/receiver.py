@@ -1,15 +1,16 @@
 """Benchmark receiver: receive time and header stamp of every message on one stamped topic.
 
     python -m forearm_dynamics.bench.receiver --topic joint_torques --out rx.npz \
-        [--diag-prefix torque_node] [--depth 1000] [--best-effort]
+        [--diag-prefix torque_node] [--depth 1000] [--best-effort] [--also joint_states]
 
 A raw subscription (the CDR bytes, no deserialisation): the callback reads the stamp at
 bytes 4..12 (after the 4-byte encapsulation header, every std_msgs/Header-first message)
 and the system clock, and appends both to array buffers, so the receiver costs the same
 whichever node is measured. /diagnostics statuses whose name starts with --diag-prefix are
 kept too (the node's own callback-time percentiles). Prints `receiver: matched` once a
-publisher on --topic is matched; SIGINT/SIGTERM write --out (.npz: recv_ns, stamp_ns) and
---out with .diag.json (list of {t, values}) and exit 0.
+publisher on --topic is matched; SIGINT/SIGTERM write --out (.npz: recv_ns, stamp_ns, and
+also_recv_ns, also_stamp_ns for --also: a second stamped topic timed the same way, to
+locate a delay between two hops) and --out with .diag.json (list of {t, values}), exit 0.
 """
 
 from __future__ import annotations
@@ -30,26 +31,35 @@ from sensor_msgs.msg import JointState
 from ..nodes.common import make_executor, spin, stream_qos
 
 
+def _timer(recv: array, stamps: array):
+    """Raw callback appending (receive time, header stamp) of each message to two arrays."""
+    unpack, now = struct.Struct("<iI").unpack_from, time.time_ns
+    recv_append, stamp_append = recv.append, stamps.append
+
+    def on_message(data: bytes) -> None:
+        t = now()
+        sec, nsec = unpack(data, 4)
+        recv_append(t)
+        stamp_append(sec * 1_000_000_000 + nsec)
+
+    return on_message
+
+
 class Receiver:
-    def __init__(self, node, topic: str, depth: int, reliable: bool, diag_prefix: str):
+    def __init__(self, node, topic: str, depth: int, reliable: bool, diag_prefix: str,
+                 also: str = ""):
         self.node = node
-        self.recv_ns = array("q")
-        self.stamp_ns = array("q")
+        self.recv_ns, self.stamp_ns = array("q"), array("q")
+        self.also_recv_ns, self.also_stamp_ns = array("q"), array("q")
         self.diag: list[dict] = []
         self._prefix = diag_prefix
         self._matched = False
-        unpack, now = struct.Struct("<iI").unpack_from, time.time_ns
-        recv_append, stamp_append = self.recv_ns.append, self.stamp_ns.append
-
-        def on_message(data: bytes) -> None:
-            t = now()
-            sec, nsec = unpack(data, 4)
-            recv_append(t)
-            stamp_append(sec * 1_000_000_000 + nsec)
-
         self.sub = node.create_subscription(
-            JointState, topic, on_message,
-            stream_qos(depth, reliable), raw=True)
+            JointState, topic, _timer(self.recv_ns, self.stamp_ns), stream_qos(depth, reliable),
+            raw=True)
+        if also:
+            node.create_subscription(JointState, also, _timer(self.also_recv_ns, self.also_stamp_ns),
+                                     stream_qos(depth, reliable), raw=True)
         if diag_prefix:
             node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 100)
         node.create_timer(0.05, self._check_matched)
@@ -66,8 +76,8 @@ class Receiver:
             print("receiver: matched", flush=True)
 
     def save(self, out: Path) -> None:
-        np.savez(out, recv_ns=np.frombuffer(self.recv_ns, dtype=np.int64),
-                 stamp_ns=np.frombuffer(self.stamp_ns, dtype=np.int64))
+        np.savez(out, **{k: np.frombuffer(getattr(self, k), dtype=np.int64)
+                         for k in ("recv_ns", "stamp_ns", "also_recv_ns", "also_stamp_ns")})
         out.with_suffix(".diag.json").write_text(json.dumps(self.diag))
 
 
@@ -78,10 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--diag-prefix", default="")
     ap.add_argument("--depth", type=int, default=1000)
     ap.add_argument("--best-effort", action="store_true")
+    ap.add_argument("--also", default="", help="a second stamped JointState topic to time")
     args, ros_args = ap.parse_known_args(argv)
     rclpy.init(args=ros_args)
     node = rclpy.create_node("bench_receiver")
-    rx = Receiver(node, args.topic, args.depth, not args.best_effort, args.diag_prefix)
+    rx = Receiver(node, args.topic, args.depth, not args.best_effort, args.diag_prefix, args.also)
     try:
         spin(node, make_executor("events"))
     finally:

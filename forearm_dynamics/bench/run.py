@@ -16,28 +16,34 @@ percentiles over every sample of that run):
   loadavg_end}, `versions` {rclpy, fastrtps, pin, numpy, forearm_dynamics}.
 - `compute.per_sample`: `inverse_dynamics` and `bare_rnea` {n, p50, p99, p99_9, max, mean}
   in µs (segmented model; the two calls alternate sample by sample), `ratio_p50`, `ratio_p99`.
-- `torque_path`: `movements`, `start_delay_s`, `variants.<name>` for `null_echo_node`,
-  `torque_node` (the 65-movement replay at 1 kHz each) and `torque_node+bag_recorder`
-  (`recorder_movements` movements, the recorder on the default topics), each with:
-  `sent` (the publisher's count), `received`, `unique`, `duplicates`, `lost`,
-  `loss_fraction`, `rate_hz` (received / receive span), `input_rate_hz`, `replay_s`,
-  `latency_ms` {n, p50, p99, p99_9, max, mean} (receive time of joint_torques at the
-  receiver - header stamp of the joint_states it answers), `first_latency_ms`,
-  `late_over_1ms_fraction`,
-  `receive_gap_ms_max`, `stalls_over_100ms`, `latency_worst_at_s` (after the publisher
-  process started), `callback_us` {periods, p50, p99, p99_worst_period, max, publish_p50,
-  publish_p99, own_p50, own_p99} (the node's /diagnostics: median over its 1 s periods;
-  publish_* = the time inside publish(), i.e. the DDS write; own_* = callback - publish,
-  per sample), `foreign_cpu_percent` (CPU of processes not
-  ours during the replay: other load on the machine), `node_process` / `publisher_process` /
-  `receiver_process` (/ `bag_recorder_process`) {cpu_percent (of one core, over the
-  replay), peak_rss_mb (VmHWM), rss_start_mb, rss_end_mb}, `exit_codes`.
-  `ratio_to_null` {latency_p50, latency_p99, callback_p50, callback_p99, cpu}: torque_node
-  / null_echo_node.
-- `choices`: `movements`, `start_delay_s`, `variants.<name>` {what, latency_ms, lost,
-  first_latency_ms, stalls_over_100ms, receive_gap_ms_max, latency_worst_at_s, callback_us,
-  cpu_percent, foreign_cpu_percent, rate_hz}: short torque_node replays that compare executor, transport and QoS (see
-  CHOICES below).
+- `torque_path` (torque_path.py): `movements`, `start_delay_s`, `recorder_movements`,
+  `variants.<name>` for `null_echo_node` and `torque_node` (the 65-movement replay at
+  1 kHz each) and `torque_node+bag_recorder` (`recorder_movements` movements with the
+  recorder on its default topics), each with:
+  - what ran: `node`, `movements`, `node_args`, `env`, `with_recorder`, `node_cpus`;
+  - counts: `expected`, `sent` (the publisher's count), `skipped_by_publisher`,
+    `received`, `unique`, `duplicates`, `lost`, `loss_fraction`;
+  - rates: `rate_hz` (received / receive span), `input_rate_hz` (from the stamps),
+    `replay_s`;
+  - latency (receive time of joint_torques at the receiver - header stamp of the
+    joint_states it answers): `latency_ms` {n, p50, p99, p99_9, max, mean},
+    `first_latency_ms`, `late_over_1ms_fraction`, `receive_gap_ms_max`,
+    `stalls_over_100ms`, `latency_worst_at_s` (after the publisher process started);
+  - `callback_us` {periods, p50, p99, p99_worst_period, max, publish_p50, publish_p99,
+    own_p50, own_p99}: the node's /diagnostics, median over its 1 s periods; publish_* =
+    the time inside publish() (the DDS write), own_* = callback - publish per sample;
+  - processes: `node_process`, `publisher_process`, `receiver_process` (and
+    `bag_recorder_process`) {cpu_percent (of one core, over the replay), peak_rss_mb
+    (VmHWM), rss_start_mb, rss_end_mb}; `foreign_cpu_percent` (CPU used by processes
+    not ours during the replay: other load on the machine); `exit_codes`.
+  `ratio_to_null` {latency_p50, latency_p99, callback_p50, callback_p99, cpu}:
+  torque_node / null_echo_node.
+- `choices`: `movements`, `start_delay_s` (1 s: streaming spans the window where a rare
+  ~0.3 s delivery stall was seen), `variants.<name>` {what, rate_hz, lost, latency_ms,
+  first_latency_ms, stalls_over_100ms, receive_gap_ms_max, latency_worst_at_s,
+  callback_us, cpu_percent, foreign_cpu_percent} (or {what, error}): short torque_node
+  replays comparing executor, QoS, transport, publication mode and CPU pinning against
+  the defaults (`choices()` lists them).
 - `recorder` (recorder.py): `topics`, `sustained_msgs_per_s`, `nominal_target_msgs_per_s`,
   `nominal_dropped`, `max_rate_kept_up_msgs_per_s`, `max_rate_is_lower_bound`,
   `generator_limited`, `recorder_peak_rss_mb`, `bag_bytes`, `steps[]` {target_msgs_per_s,

@@ -53,6 +53,7 @@ class Variant:
     recorder: bool = False  # run bag_recorder on the default topics as well
     best_effort: bool = False  # receiver QoS (must match the node's output QoS)
     pin: bool = False  # node alone on the last CPU, every other process on the others
+    also_input: bool = False  # the receiver also times joint_states (locates a delay's hop)
 
     def cpus(self) -> tuple[set[int] | None, set[int] | None]:
         """(node CPUs, other processes' CPUs) for a pinned variant; (None, None) if not."""
@@ -113,6 +114,8 @@ def run_variant(v: Variant, movements: list[int], domain: int, work: Path,
         rx_args = ["--topic", "joint_torques", "--out", str(rx_path), "--diag-prefix", v.node]
         if v.best_effort:
             rx_args.append("--best-effort")
+        if v.also_input:
+            rx_args += ["--also", "joint_states"]
         rx = Child.module("receiver", "forearm_dynamics.bench.receiver", rx_args, env, logs,
                           cpus=other_cpus)
         children.append(rx)

@@ -45,7 +45,12 @@ def stream_qos(depth: int = 100, reliable: bool = True) -> QoSProfile:
 
 
 def make_executor(kind: str = "events"):
-    """EventsExecutor measured best at 1 kHz on these wheels; single-threaded as a fallback."""
+    """EventsExecutor measured best at 1 kHz on these wheels; single-threaded as a fallback.
+
+    make bench (section choices, torque_node at 1 kHz): events 15.7 % CPU, latency p50
+    0.263 ms; single-threaded 36.1 %, 0.320 ms. The MultiThreadedExecutor is not offered:
+    with a timer and a busy subscription it collapses to tens of Hz (ROS-NOTES).
+    """
     if kind == "events":
         from rclpy.experimental import EventsExecutor
 

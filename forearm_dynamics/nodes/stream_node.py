@@ -3,17 +3,22 @@
 One raw subscription, one raw publisher (jointstate_cdr.py): the node works on the CDR
 bytes. An input message's shape (frame_id, names, field counts) is parsed, checked against
 rclpy's deserialiser and validated (names, lengths) once, then cached; a message of a known
-shape costs one bytes comparison, a memcpy and numpy `take`s into the output template, whose
-position, velocity and effort are numpy views, so a sample is gathered straight into the
-outgoing bytes (model joint order). Nothing is allocated per message but the bytes rclpy
-hands over and the bytes published. Shapes the parser does not vouch for go through rclpy's
-deserialiser and the same checks (`_ingest`). Subclasses only fill `effort` (and `velocity`
-when the input has none) in `compute()`.
+shape costs one masked comparison, a memcpy and numpy `take`s into the output template,
+whose position, velocity and effort are 8-byte-aligned numpy views, so a sample is
+gathered straight into the outgoing bytes (model joint order). Nothing is allocated per
+message but the bytes rclpy hands over and the bytes published. Shapes the parser does not
+vouch for go through rclpy's deserialiser and the same checks (`_ingest`). Subclasses only
+fill `effort` (and `velocity` when the input has none) in `compute()`.
 
-Measured (make bench, 65-movement replay, before -> after this design): torque_node
-callback p50/p99 107/230 us -> see benchmarks/results.json; the raw path removes
-`convert_to_py` of every input (~13 % of the node's CPU in py-spy) and the C-struct
-conversion + CDR serialisation of every output.
+Why (py-spy and line_profiler on the node at 1 kHz): `convert_to_py` of every input was
+~13 % of the node's CPU and publish() converted the message back to C structs and CDR;
+every numpy call costs several times its warm cost in a process that sleeps between
+samples, so the path keeps them few; and the template's arrays must be aligned (views on
+a plain bytearray are not: numpy and eigenpy then take slow paths). The shape of the first
+sample and numpy's percentile (diagnostics) are warmed up at start-up. Measured by
+`make bench` (65-movement replay at 1 kHz; benchmarks/results_before.json -> results.json):
+torque_node latency p50/p99/max 0.367/0.863/31.6 -> 0.254/0.611/3.9 ms, callback p50/p99
+107/230 -> 89/213 us (of which publish() 51/112), CPU 20.8 -> 15.0 % of a core.
 
 Stamp rules (max_stamp_gap = G):
     stamp zero                      -> rejected (stamp_missing)
@@ -57,9 +62,11 @@ from .params import Params, Spec
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
 
-#: Why the default depth is 1000 (measured on this machine, UDP loopback, Fast DDS): a
-#: one-off 0.27-0.34 s reliable-delivery stall happens in many runs (about 3 s after a new
-#: publisher joins); with depth 100 at 1 kHz ~230 samples were then dropped, with 1000 none.
+#: Why the default depth is 1000 (measured on this machine, Fast DDS on loopback, whatever
+#: the transport): a one-off ~0.3 s reliable-delivery stall happens in some runs (about 3 s
+#: after a new publisher joins); a short queue then drops samples (depth 100: ~230, depth
+#: 10: 318 in make bench), 1000 none. Reliable, depth 1000 and the EventsExecutor were
+#: chosen by measurement: make bench, section choices; see config/torque_node.yaml.
 QOS_NOTE = "depth 1000 = 1 s at 1 kHz: rides out a ~0.3 s delivery stall without loss"
 
 #: Topics the stream nodes use themselves: input/output may not name them.
@@ -162,6 +169,9 @@ class JointStreamNode(Node):
         if s.diagnostics_period > 0:
             self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self.create_timer(s.diagnostics_period, self._publish_diagnostics)
+        # First-call costs (shape parsing and checks, numpy paths) now, not on the first
+        # sample: the usual shape (model joint order, positions + velocities) is cached.
+        self._plan_for(OutputTemplate(self.joint_names, effort=False).payload())
         self.get_logger().info(
             f"{self.sub.topic_name} -> {self.pub.topic_name} "
             f"(depth {s.qos_depth}, {'reliable' if s.qos_reliable else 'best effort'}, "
