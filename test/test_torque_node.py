@@ -121,7 +121,7 @@ def test_config_is_latched(tn) -> None:
     assert cfg["body_size"]["label"] == "p50" and cfg["body_size"]["mass"] == 1.0
     assert cfg["simplified"]["split"] == load_description().simplified.split
     assert cfg["joint_names"] == list(JOINT_NAMES)
-    assert cfg["version"] and cfg["estimator"]["accel_cutoff_hz"] == 0.0
+    assert cfg["version"] and cfg["estimator"]["settings"]["accel_cutoff_hz"] == 0.0
 
 
 def test_static_posture_gives_gravity_torques(tn) -> None:
@@ -348,24 +348,22 @@ def test_invalid_parameters_exit_2_with_one_line() -> None:
 
 # -- the estimator on its own (no ROS) -----------------------------------------------------
 def test_estimator_lowpass_is_exact_for_constant_acceleration_and_lags_by_tau() -> None:
-    from forearm_dynamics.nodes.estimator import DerivativeEstimator, EstimatorConfig
+    from forearm_dynamics.estimation import make_estimator
 
-    cfg = EstimatorConfig(accel_cutoff_hz=20.0)
-    tau = cfg.tau(20.0)
-    est = DerivativeEstimator(20, cfg)
+    tau = 1.0 / (2.0 * np.pi * 20.0)
+    est = make_estimator("backward", 20, {"accel_cutoff_hz": 20.0})
     a = RNG.uniform(-5, 5, 20)
-    qd = np.zeros(20)
-    warm = [est.update(k * MS, POSTURE, np.array(a * k * 1e-3), True) for k in range(50)]
+    warm = [est.update(k * MS, POSTURE, np.array(a * k * 1e-3)) for k in range(50)]
     assert warm[0] is False and all(warm[1:])
     np.testing.assert_allclose(est.qdd, a, rtol=1e-9)  # filter starts at the first estimate
     # the acceleration steps to 0: the filtered estimate decays with time constant tau
     v_end = a * 49e-3
     n = round(tau / 1e-3)
     for k in range(50, 50 + n):
-        est.update(k * MS, POSTURE, v_end.copy(), True)
+        est.update(k * MS, POSTURE, v_end.copy())
     alpha = 1e-3 / (tau + 1e-3)
     np.testing.assert_allclose(est.qdd, a * (1 - alpha) ** n, rtol=1e-9)
     assert 0.3 < (1 - alpha) ** n < 0.4  # ~ e^-1 after one time constant
-    assert cfg.lag(1e-3) == pytest.approx(0.5e-3 + tau)
+    assert est.lag(1e-3, velocity_given=True)["qdd"] == pytest.approx(0.5e-3 + tau)
     est.reset()
-    assert est.update(10**12, POSTURE, qd, False) is False and not est.qdd.any()
+    assert est.update(10**12, POSTURE, None) is False and not est.qdd.any()

@@ -6,7 +6,7 @@ Output sensor_msgs/JointState on `joint_torques`: the model's 20 joints in joint
        order; position and velocity as used (velocity = the estimate when the input had
        none); effort = RNEA torques (N·m); header (stamp, frame_id) copied from the input.
 
-Accelerations come from consecutive header stamps (estimator.py: backward difference,
+Accelerations come from consecutive header stamps (estimation/backward.py: backward difference,
 optional first-order low-pass). Lag: dt/2 (0.5 ms at 1 kHz) from given velocities, dt
 (1 ms) from positions only, plus 1/(2 pi fc) per enabled low-pass. Warm-up: the first
 sample after start or a reset is answered with qdd = 0 (and qd = 0 if estimated), counted
@@ -31,9 +31,9 @@ from ..anthropometry import DIMENSIONS, resolve_body_size
 from ..builders import MODEL_KINDS
 from ..description import load_description
 from ..dynamics import ArmModel, build_model
+from ..estimation import make_estimator
 from . import validation as v
 from .common import CONFIG_TOPIC, latched_qos, main_for, package_version
-from .estimator import DerivativeEstimator, EstimatorConfig
 from .params import ParameterError, Params, Spec
 from .stream_node import STREAM_SPECS, JointStreamNode
 
@@ -104,7 +104,7 @@ class TorqueNode(JointStreamNode):
             "node": self.get_fully_qualified_name(),
             "version": package_version(),
             **model_config(self.arm, self._split),
-            "estimator": self.estimator.config.as_dict(),
+            "estimator": self.estimator.describe(1e-3),
             "input_topic": self.sub.topic_name,
             "output_topic": self.pub.topic_name,
             "max_stamp_gap": self.settings.max_stamp_gap,
@@ -117,11 +117,10 @@ class TorqueNode(JointStreamNode):
 
     def configure(self, params: Params) -> tuple[str, ...]:
         self.arm, self._split = _model_from_params(params)
-        cfg = EstimatorConfig(
-            accel_cutoff_hz=params.number("estimator.accel_cutoff_hz", 0.0, 1e6),
-            velocity_cutoff_hz=params.number("estimator.velocity_cutoff_hz", 0.0, 1e6),
-        )
-        self.estimator = DerivativeEstimator(self.arm.nv, cfg)
+        self.estimator = make_estimator("backward", self.arm.nv, {
+            "accel_cutoff_hz": params.number("estimator.accel_cutoff_hz", 0.0, 1e6),
+            "velocity_cutoff_hz": params.number("estimator.velocity_cutoff_hz", 0.0, 1e6),
+        })
         self._pin_model, self._pin_data = self.arm.model, self.arm.data
         return self.arm.joint_names
 
@@ -129,7 +128,9 @@ class TorqueNode(JointStreamNode):
         est = self.estimator
         if reset:
             est.reset()
-        warm = est.update(t_ns, self.q, self.qd, velocity_given)
+        warm = est.update(t_ns, self.q, self.qd if velocity_given else None)
+        if not velocity_given:
+            np.copyto(self.qd, est.qd)
         tau = pin.rnea(self._pin_model, self._pin_data, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh

@@ -31,34 +31,10 @@ be meaningless, so the estimator warms up again.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class EstimatorConfig:
-    """Estimator settings (see the module docstring for their effect on lag)."""
-
-    accel_cutoff_hz: float = 0.0  # 0 = no low-pass on qdd
-    velocity_cutoff_hz: float = 0.0  # 0 = no low-pass on qd estimated from positions
-
-    def tau(self, cutoff_hz: float) -> float:
-        return 0.0 if cutoff_hz <= 0.0 else 1.0 / (2.0 * math.pi * cutoff_hz)
-
-    def lag(self, dt: float, velocity_given: bool = True) -> float:
-        """Low-frequency delay (s) of the qdd estimate at sample period dt."""
-        ta, tv = self.tau(self.accel_cutoff_hz), self.tau(self.velocity_cutoff_hz)
-        return dt / 2 + ta if velocity_given else dt + tv + ta
-
-    def as_dict(self) -> dict:
-        return {
-            "method": "backward_difference+lowpass1",
-            "accel_cutoff_hz": self.accel_cutoff_hz,
-            "velocity_cutoff_hz": self.velocity_cutoff_hz,
-            "lag_at_1khz_s": self.lag(1e-3),
-            "lag_at_1khz_from_positions_s": self.lag(1e-3, velocity_given=False),
-        }
+from .base import SettingSpec, StateEstimator
 
 
 class _Differentiator:
@@ -95,41 +71,53 @@ class _Differentiator:
         self.has_prev = True
 
 
-class DerivativeEstimator:
-    """qd (when not given) and qdd from stamped samples; see the module docstring."""
+class BackwardDifference(StateEstimator):
+    """qd (when not given) and qdd by backward differences; see the module docstring."""
 
-    def __init__(self, n: int, config: EstimatorConfig):
-        self.config = config
-        self._vel = _Differentiator(n, config.tau(config.velocity_cutoff_hz))
-        self._acc = _Differentiator(n, config.tau(config.accel_cutoff_hz))
-        self._t_ns: int | None = None
+    name = "backward"
+    settings = (
+        SettingSpec("accel_cutoff_hz", 0.0, "Hz", "first-order low-pass on the acceleration; 0 = off"),
+        SettingSpec("velocity_cutoff_hz", 0.0, "Hz",
+                    "first-order low-pass on velocities estimated from positions; 0 = off"),
+    )
+
+    def __init__(self, n: int, settings):
+        super().__init__(n, settings)
+        self._vel = _Differentiator(n, _tau(self.values["velocity_cutoff_hz"]))
+        self._acc = _Differentiator(n, _tau(self.values["accel_cutoff_hz"]))
 
     def reset(self) -> None:
         self._vel.reset()
         self._acc.reset()
         self._t_ns = None
 
-    def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray, velocity_given: bool) -> bool:
-        """Advance to the sample at t_ns; fill qd (if not given) and return warm.
-
-        The caller guarantees t_ns is later than the previous sample (or calls reset()).
-        qd is read when velocity_given, else written with the estimate. qdd is `self.qdd`.
-        """
+    def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
         dt = 0.0 if self._t_ns is None else (t_ns - self._t_ns) * 1e-9
         self._t_ns = t_ns
-        if velocity_given:
+        np.copyto(self.q, q)
+        if qd is not None:
+            np.copyto(self.qd, qd)
             if self._vel.has_prev:
                 self._vel.reset()
         else:
             self._vel.update(q, dt)
-            np.copyto(qd, self._vel.out)
+            np.copyto(self.qd, self._vel.out)
             if not self._vel.valid:
                 # No velocity yet: keep the acceleration history empty too.
                 self._acc.reset()
+                self.qdd.fill(0.0)
                 return False
-        self._acc.update(qd, dt)
+        self._acc.update(self.qd, dt)
+        np.copyto(self.qdd, self._acc.out)
         return self._acc.valid
 
-    @property
-    def qdd(self) -> np.ndarray:
-        return self._acc.out
+    def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
+        ta = _tau(self.values["accel_cutoff_hz"])
+        tv = _tau(self.values["velocity_cutoff_hz"])
+        if velocity_given:
+            return {"q": 0.0, "qd": 0.0, "qdd": dt / 2 + ta}
+        return {"q": 0.0, "qd": dt / 2 + tv, "qdd": dt + tv + ta}
+
+
+def _tau(cutoff_hz: float) -> float:
+    return 0.0 if cutoff_hz <= 0.0 else 1.0 / (2.0 * math.pi * cutoff_hz)

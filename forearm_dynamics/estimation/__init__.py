@@ -1,0 +1,49 @@
+"""Causal state estimation: q, q̇, q̈ of every joint from stamped (noisy) samples.
+
+ROS-free. Every estimator implements `StateEstimator` (base.py) and is registered by name
+in ESTIMATORS; `make_estimator(name, n, settings)` builds one. Its settings are described
+by `SettingSpec`s (name, default, unit, range, description) so the node can declare them
+as ROS parameters `estimator.<setting>` without knowing the method.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from .backward import BackwardDifference
+from .base import SettingSpec, StateEstimator
+
+#: name -> class. The first entry is the default.
+ESTIMATORS: dict[str, type[StateEstimator]] = {
+    BackwardDifference.name: BackwardDifference,
+}
+
+DEFAULT_ESTIMATOR = next(iter(ESTIMATORS))
+
+
+def make_estimator(name: str, n: int, settings: Mapping[str, float] | None = None) -> StateEstimator:
+    """The estimator `name` for n joints; ValueError names an unknown method or setting."""
+    try:
+        cls = ESTIMATORS[name]
+    except KeyError:
+        raise ValueError(f"unknown estimator {name!r}: one of {', '.join(ESTIMATORS)}") from None
+    return cls(n, dict(settings or {}))
+
+
+def all_settings() -> dict[str, SettingSpec]:
+    """Every estimator's settings by name (a name shared by two methods means the same)."""
+    out: dict[str, SettingSpec] = {}
+    for cls in ESTIMATORS.values():
+        for s in cls.settings:
+            out.setdefault(s.name, s)
+    return out
+
+
+__all__ = [
+    "DEFAULT_ESTIMATOR",
+    "ESTIMATORS",
+    "SettingSpec",
+    "StateEstimator",
+    "all_settings",
+    "make_estimator",
+]
