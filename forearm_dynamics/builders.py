@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .anthropometry import BodySize
 from .description import ModelDescription, RigidBody
 from .hand import hand_subtree
-from .tree import Joint, KinematicTree, Link, combine, cylinder_inertia, massless
+from .payload import Payload
+from .tree import (
+    SIDES,
+    Joint,
+    KinematicTree,
+    Link,
+    combine,
+    cylinder_inertia,
+    massless,
+    mirror_tree,
+    weld,
+)
 
 MODEL_KINDS = ("anatomical", "solid", "segmented")
 
@@ -143,8 +154,16 @@ def build_tree(
     split: float | None = None,
     axis_offset_proximal=None,
     axis_offset_distal=None,
+    *,
+    side: str = "right",
+    payload: Payload | None = None,
 ) -> KinematicTree:
-    """The full 20-DOF tree of one model kind at one body size."""
+    """The full 20-DOF tree of one model kind at one body size, either arm, with a payload.
+
+    The right arm is built, the payload welded to its carpus, and for side="left" the whole
+    tree is mirrored (tree.mirror_tree), so every engine reading the tree gets both.
+    """
+    side = _side(side)
     s = desc.simplified
     if kind == "anatomical":
         if split is not None or axis_offset_proximal is not None or axis_offset_distal is not None:
@@ -169,7 +188,24 @@ def build_tree(
     hum = desc.anatomical.humerus
     root = Link("humerus", hum.mass * size.mass, hum.com, hum.inertia * size.mass)
     links = [links[0], links[1], *h_links]
-    return KinematicTree(kind, size, desc.gravity.copy(), root, tuple(links), tuple(joints + h_joints))
+    tree = KinematicTree(kind, size, desc.gravity.copy(), root, tuple(links), tuple(joints + h_joints))
+    return _personalised(tree, side, payload)
+
+
+def _side(side) -> str:
+    s = side.strip().lower() if isinstance(side, str) else side
+    if s not in SIDES:
+        raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+    return s
+
+
+def _personalised(tree: KinematicTree, side: str, payload: Payload | None) -> KinematicTree:
+    """Weld the payload to the right carpus (hand frame = carpus frame), then mirror if left."""
+    if payload is not None:
+        body = Link("payload", payload.mass, np.zeros(3), payload.inertia.copy())
+        tree = weld(tree, "payload_weld", "carpus", payload.com, body)
+        tree = replace(tree, payload=payload)
+    return mirror_tree(tree) if side == "left" else tree
 
 
 __all__ = ["MODEL_KINDS", "build_tree", "forearm_cylinder", "massless"]

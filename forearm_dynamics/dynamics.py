@@ -11,6 +11,8 @@ import pinocchio as pin
 from .anthropometry import BodySize, resolve_body_size
 from .builders import build_tree
 from .description import load_description
+from .hand import grasp_point
+from .payload import Payload, make_payload
 from .tree import KinematicTree
 
 _OVERRIDES = ("split", "axis_offset_proximal", "axis_offset_distal")
@@ -36,6 +38,16 @@ def pinocchio_model(tree: KinematicTree) -> pin.Model:
         fid = model.addJointFrame(jid)
         model.addBodyFrame(link.name, jid, pin.SE3.Identity(), fid)
         ids[link.name] = jid
+    # Welded bodies (the payload) join their parent's joint body: mass, never a coordinate.
+    where = {name: (jid, np.zeros(3)) for name, jid in ids.items()}
+    for weld in tree.fixed_joints:
+        link = tree.link(weld.child)
+        jid, at = where[weld.parent]
+        at = at + np.asarray(weld.origin, float)
+        placement = pin.SE3(np.eye(3), at)
+        model.appendBodyToJoint(jid, pin.Inertia(link.mass, link.com, link.inertia), placement)
+        model.addBodyFrame(link.name, jid, placement, model.getFrameId(weld.parent))
+        where[link.name] = (jid, at)
     return model
 
 
@@ -46,6 +58,8 @@ class ArmModel:
         self.tree = tree
         self.kind = tree.kind
         self.body_size: BodySize = tree.body_size
+        self.side: str = tree.side
+        self.payload: Payload | None = tree.payload
         self.joint_names: tuple[str, ...] = tree.joint_names
         self.nv = len(self.joint_names)
         self.model = pinocchio_model(tree)
@@ -53,7 +67,9 @@ class ArmModel:
         self._one = (self.nv,)
 
     def __repr__(self) -> str:
-        return f"ArmModel(kind={self.kind!r}, body_size={self.body_size.label!r}, nv={self.nv})"
+        payload = "" if self.payload is None else f", payload_mass={self.payload.mass!r}"
+        return (f"ArmModel(kind={self.kind!r}, body_size={self.body_size.label!r}, "
+                f"side={self.side!r}{payload}, nv={self.nv})")
 
     # -- inverse dynamics -------------------------------------------------------------
     def inverse_dynamics(self, q, qd, qdd) -> np.ndarray:
@@ -115,12 +131,26 @@ class ArmModel:
         return self.inverse_dynamics(q, z, z)
 
 
-def build_model(kind: str = "segmented", body_size: Any = 50, **overrides) -> ArmModel:
+def build_model(
+    kind: str = "segmented",
+    body_size: Any = 50,
+    *,
+    side: str = "right",
+    payload_mass: float = 0.0,
+    payload_com=None,
+    payload_inertia=None,
+    **overrides,
+) -> ArmModel:
     """Build one of the three 20-DOF models.
 
-    kind: "segmented", "solid" or "anatomical". body_size: 5, 50, 95, or a dict with
-    stature/body_mass (and optional forearm_length, hand_length, hand_breadth), in m and kg.
-    overrides (simplified models only): split, axis_offset_proximal, axis_offset_distal.
+    kind: "segmented", "solid" or "anatomical". body_size: 5, 50, 95 (men), "male_5" ...
+    "female_95", or a dict with stature/body_mass (and optional forearm_length, hand_length,
+    hand_breadth), in m and kg. side: "right" or "left" (the mirror image, same joint names
+    and signs). payload_mass (kg), payload_com ((x, y, z) m in the hand frame; None = the
+    default power-grasp point, hand.grasp_point), payload_inertia (None = point mass, or
+    (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) kg·m² about the payload COM): an object held in the hand,
+    see payload.py for the frame. overrides (simplified models only): split,
+    axis_offset_proximal, axis_offset_distal.
     """
     unknown = set(overrides) - set(_OVERRIDES)
     if unknown:
@@ -128,4 +158,6 @@ def build_model(kind: str = "segmented", body_size: Any = 50, **overrides) -> Ar
     if not isinstance(kind, str):
         raise ValueError(f"model kind must be a string, got {kind!r}")  # noqa: TRY004
     size = resolve_body_size(body_size)
-    return ArmModel(build_tree(kind, load_description(), size, **overrides))
+    desc = load_description()
+    payload = make_payload(payload_mass, payload_com, payload_inertia, grasp_point(desc, size))
+    return ArmModel(build_tree(kind, desc, size, side=side, payload=payload, **overrides))

@@ -6,6 +6,7 @@ import numpy as np
 
 from .anthropometry import BodySize
 from .description import FINGERS, ModelDescription
+from .payload import GRASP_OBJECT_RADIUS
 from .tree import Joint, Link, cylinder_inertia, massless, prism_inertia
 
 X, Y, Z = np.eye(3)
@@ -76,3 +77,16 @@ def hand_subtree(
             segment(name, mass[seg][f], seg_len, r_finger, -Y)
             parent_link, origin = name, -seg_len * Y
     return links, joints
+
+
+def grasp_point(desc: ModelDescription, size: BodySize) -> np.ndarray:
+    """The default payload COM in the hand (carpus) frame: a power grasp.
+
+    Palm centre (the carpus prism's centre, half a palm length distal of the wrist centre),
+    moved to the palmar side by half the palm thickness plus the radius of a 60 mm object.
+    The hand dimensions scale with body size; the object does not.
+    """
+    h = desc.hand
+    palm = h.palm_length * size.hand_length
+    thick = h.thickness_fraction * h.breadth * size.hand_breadth
+    return np.array([0.0, -0.5 * palm, -(0.5 * thick + GRASP_OBJECT_RADIUS)])

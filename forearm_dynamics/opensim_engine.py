@@ -49,7 +49,7 @@ def build_osim_model(tree: KinematicTree) -> Any:
     """An osim.Model mirroring `tree`: one single-coordinate CustomJoint per tree joint."""
     osim = _osim()
     model = osim.Model()
-    model.setName(f"forearm_{tree.kind}_{tree.body_size.label}")
+    model.setName(f"forearm_{tree.kind}_{tree.side}_{tree.body_size.label}")
     model.setGravity(_vec3(osim, tree.gravity))  # explicit: never rely on the default
 
     def body(link: Link) -> Any:
@@ -85,6 +85,11 @@ def build_osim_model(tree: KinematicTree) -> Any:
         coord.setRangeMax(float(joint.upper))
         coord.setDefaultClamped(False)  # ID must work outside the anatomical range too
         coord.setDefaultLocked(False)
+    for weld in tree.fixed_joints:  # the payload: a body welded to the carpus
+        child = bodies[weld.child] = body(tree.link(weld.child))
+        model.addBody(child)
+        model.addJoint(osim.WeldJoint(weld.name, bodies[weld.parent], _vec3(osim, weld.origin), zero,
+                                      child, zero, zero))
     model.finalizeConnections()
     return model
 

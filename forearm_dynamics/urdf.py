@@ -31,13 +31,15 @@ def tree_to_urdf(tree: KinematicTree) -> str:
     parts = [
         '<?xml version="1.0"?>',
         (
-            f"<!-- forearm_dynamics {tree.kind} model, body size {tree.body_size.label}. "
-            f"Frames: x anterior, y superior, z lateral; gravity {_v(tree.gravity)} m/s^2. -->"
+            f"<!-- forearm_dynamics {tree.kind} model, {tree.side} arm, body size "
+            f"{tree.body_size.label}. Frames: x anterior, y superior, z "
+            f"{'lateral' if tree.side == 'right' else 'medial (the mirror image of the right arm)'}"
+            f"; gravity {_v(tree.gravity)} m/s^2. -->"
         ),
         f'<robot name="forearm_{tree.kind}">',
         _link(tree.root),
     ]
-    parts += [_link(link) for link in tree.links]
+    parts += [_link(link) for link in (*tree.links, *tree.fixed_links)]
     for j in tree.joints:
         parts.append(
             f"  <!-- {j.name}: {SIGN_CONVENTIONS[j.name]} -->\n"
@@ -46,6 +48,14 @@ def tree_to_urdf(tree: KinematicTree) -> str:
             f'    <origin xyz="{_v(j.origin)}" rpy="0 0 0"/>\n'
             f'    <axis xyz="{_v(j.axis)}"/>\n'
             f'    <limit lower="{float(j.lower)!r}" upper="{float(j.upper)!r}" effort="1000" velocity="100"/>\n'
+            "  </joint>"
+        )
+    for w in tree.fixed_joints:
+        parts.append(
+            f"  <!-- {w.name}: {w.child} welded to {w.parent} (no coordinate) -->\n"
+            f'  <joint name="{w.name}" type="fixed">\n'
+            f'    <parent link="{w.parent}"/>\n    <child link="{w.child}"/>\n'
+            f'    <origin xyz="{_v(w.origin)}" rpy="0 0 0"/>\n'
             "  </joint>"
         )
     parts.append("</robot>\n")

@@ -13,7 +13,10 @@ def die(message: str, code: int = 2) -> int:
 
 
 def body_size_arg(text: str):
-    """'50' -> 50; '1.80,75' -> {'stature': 1.80, 'body_mass': 75.0}."""
+    """'50' -> 50; 'female_50' -> 'female_50'; '1.80,75' -> {'stature': 1.80, 'body_mass': 75.0}.
+
+    A name is passed on as it is: build_model checks it and says which names exist.
+    """
     text = text.strip()
     if "," in text:
         try:
@@ -21,7 +24,25 @@ def body_size_arg(text: str):
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected stature_m,body_mass_kg, got {text!r}") from None
         return {"stature": stature, "body_mass": mass}
+    if text[:1].isalpha() and not text.lower().startswith("p"):
+        return text
     try:
         return int(text.removesuffix("th"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 5, 50, 95 or stature,mass; got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected 5, 50, 95, a name such as female_50, or stature,mass; got {text!r}") from None
+
+
+def numbers_arg(count: int, what: str):
+    """An argparse type: `count` comma-separated numbers ('0,-0.06,-0.045')."""
+
+    def parse(text: str) -> tuple[float, ...]:
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            values = ()
+        if len(values) != count:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return values
+
+    return parse
