@@ -36,3 +36,30 @@ def test_export_urdf_refuses_bad_input(tmp_path):
     r = run("--model", "segmented", "-o", str(tmp_path / "missing" / "arm.urdf"))
     assert r.returncode == 2
     assert "cannot write" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_export_urdf_left_female_with_payload(tmp_path):
+    out = tmp_path / "left.urdf"
+    r = run("--model", "anatomical", "--side", "left", "--body-size", "female_50",
+            "--payload-mass", "0.7", "--payload-com=-0.01,-0.06,-0.045",
+            "--payload-inertia", "1e-3,8e-4,9e-4,0,0,1e-4", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "left arm" in r.stderr and "female_50" in r.stderr
+    ref = build_model("anatomical", "female_50", side="left", payload_mass=0.7,
+                      payload_com=(-0.01, -0.06, -0.045),
+                      payload_inertia=(1e-3, 8e-4, 9e-4, 0, 0, 1e-4))
+    assert out.read_text(encoding="utf-8") == ref.to_urdf()
+    model = pin.buildModelFromUrdf(str(out))
+    total = sum(model.inertias[i].mass for i in range(1, model.njoints))
+    assert abs(total - 0.7 - sum(link.mass for link in ref.tree.links)) < 1e-12
+
+
+def test_export_urdf_refuses_bad_personalisation():
+    for args, words in ((("--payload-mass", "-2"), "payload_mass"),
+                        (("--payload-mass", "1", "--payload-com", "0,0,0.9"), "payload_com"),
+                        (("--payload-mass", "1", "--payload-inertia", "1,1,3,0,0,0"), "payload_inertia"),
+                        (("--body-size", "female_42"), "female_42"),
+                        (("--side", "middle"), "--side")):
+        r = run(*args)
+        assert r.returncode == 2, (args, r.stderr)
+        assert words in r.stderr and "Traceback" not in r.stderr
