@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -10,17 +10,8 @@ from .anthropometry import BodySize
 from .description import ModelDescription, RigidBody
 from .hand import hand_subtree
 from .payload import Payload
-from .tree import (
-    SIDES,
-    Joint,
-    KinematicTree,
-    Link,
-    combine,
-    cylinder_inertia,
-    massless,
-    mirror_tree,
-    weld,
-)
+from .personal import check_side, personalise
+from .tree import Joint, KinematicTree, Link, combine, cylinder_inertia, massless
 
 MODEL_KINDS = ("anatomical", "solid", "segmented")
 
@@ -163,7 +154,7 @@ def build_tree(
     The right arm is built, the payload welded to its carpus, and for side="left" the whole
     tree is mirrored (tree.mirror_tree), so every engine reading the tree gets both.
     """
-    side = _side(side)
+    side = check_side(side)
     s = desc.simplified
     if kind == "anatomical":
         if split is not None or axis_offset_proximal is not None or axis_offset_distal is not None:
@@ -189,23 +180,7 @@ def build_tree(
     root = Link("humerus", hum.mass * size.mass, hum.com, hum.inertia * size.mass)
     links = [links[0], links[1], *h_links]
     tree = KinematicTree(kind, size, desc.gravity.copy(), root, tuple(links), tuple(joints + h_joints))
-    return _personalised(tree, side, payload)
-
-
-def _side(side) -> str:
-    s = side.strip().lower() if isinstance(side, str) else side
-    if s not in SIDES:
-        raise ValueError(f"side must be 'right' or 'left', got {side!r}")
-    return s
-
-
-def _personalised(tree: KinematicTree, side: str, payload: Payload | None) -> KinematicTree:
-    """Weld the payload to the right carpus (hand frame = carpus frame), then mirror if left."""
-    if payload is not None:
-        body = Link("payload", payload.mass, np.zeros(3), payload.inertia.copy())
-        tree = weld(tree, "payload_weld", "carpus", payload.com, body)
-        tree = replace(tree, payload=payload)
-    return mirror_tree(tree) if side == "left" else tree
+    return personalise(tree, side, payload)
 
 
 __all__ = ["MODEL_KINDS", "build_tree", "forearm_cylinder", "massless"]
