@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
+from numbers import Integral
 from typing import Any
 
 import yaml
@@ -113,7 +114,8 @@ def resolve_body_size(body_size: int | str | Mapping[str, float] | BodySize = 50
     ref = tabulated_dimensions(_table()["reference"])
     if isinstance(body_size, bool):
         raise ValueError(f"body_size must be a percentile or a dict, got {body_size!r}")  # noqa: TRY004 - API promises ValueError
-    if isinstance(body_size, int):
+    if isinstance(body_size, Integral):  # numpy integers too
+        body_size = int(body_size)
         percentile_dimensions(body_size)  # the men's percentiles only: a clear error otherwise
         body_size = f"male_{body_size}"
     if isinstance(body_size, str):

@@ -72,6 +72,8 @@ def make_payload(mass: Any, com: Any, inertia: Any, default_com: np.ndarray) -> 
     payload_inertia), so a node can pass it on as the reason a parameter was refused.
     """
     try:
+        if isinstance(mass, bool | str):
+            raise TypeError
         m = float(mass)
     except (TypeError, ValueError):
         raise ValueError(f"payload_mass must be a number (kg), got {mass!r}") from None

@@ -54,6 +54,7 @@ def test_ratios_are_to_the_male_50th(name):
     assert size.label == (f"p{pct}" if sex == "male" else name)
     if sex == "male":  # the integers keep meaning the men's percentiles
         assert resolve_body_size(int(pct)) == size
+        assert resolve_body_size(np.int64(pct)) == size
     assert resolve_body_size(name.upper()) == size
 
 

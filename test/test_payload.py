@@ -122,6 +122,7 @@ def test_urdf_carries_the_payload():
     ({"payload_mass": float("nan")}, "payload_mass"),
     ({"payload_mass": float("inf")}, "payload_mass"),
     ({"payload_mass": "heavy"}, "payload_mass"),
+    ({"payload_mass": True}, "payload_mass"),
     ({"payload_mass": 500.0}, "payload_mass"),
     ({"payload_mass": 1.0, "payload_com": (0.6, 0.0, 0.0)}, "payload_com"),
     ({"payload_mass": 1.0, "payload_com": (0.0, float("nan"), 0.0)}, "payload_com"),
