@@ -9,11 +9,11 @@ import numpy as np
 import pinocchio as pin
 
 from .anthropometry import BodySize, resolve_body_size
-from .builders import build_tree
+from .builders import ForearmPlacement, build_tree, resolve_placement
 from .description import load_description
 from .tree import KinematicTree
 
-_OVERRIDES = ("split", "axis_offset_proximal", "axis_offset_distal")
+_OVERRIDES = ("split", "axis_offset_proximal", "axis_offset_distal", "cylinder")
 
 
 def pinocchio_model(tree: KinematicTree) -> pin.Model:
@@ -42,8 +42,10 @@ def pinocchio_model(tree: KinematicTree) -> pin.Model:
 class ArmModel:
     """A built model: joint names, inverse dynamics, URDF export."""
 
-    def __init__(self, tree: KinematicTree):
+    def __init__(self, tree: KinematicTree, placement: ForearmPlacement | None = None):
         self.tree = tree
+        #: how the forearm was built (name, split, axis offsets); None for the anatomical model
+        self.placement = placement
         self.kind = tree.kind
         self.body_size: BodySize = tree.body_size
         self.joint_names: tuple[str, ...] = tree.joint_names
@@ -115,12 +117,16 @@ class ArmModel:
         return self.inverse_dynamics(q, z, z)
 
 
-def build_model(kind: str = "segmented", body_size: Any = 50, **overrides) -> ArmModel:
+def build_model(kind: str = "segmented", body_size: Any = 50, placement: str | None = None,
+                **overrides) -> ArmModel:
     """Build one of the three 20-DOF models.
 
     kind: "segmented", "solid" or "anatomical". body_size: 5, 50, 95, or a dict with
     stature/body_mass (and optional forearm_length, hand_length, hand_breadth), in m and kg.
-    overrides (simplified models only): split, axis_offset_proximal, axis_offset_distal.
+    placement (segmented only): "paper", "parallel" or "oblique" (config/model.yaml);
+    None = the config's default_placement. The built model's `placement` says which.
+    overrides (simplified models only): split, axis_offset_proximal, axis_offset_distal,
+    cylinder ("uniform" | "mass_matched").
     """
     unknown = set(overrides) - set(_OVERRIDES)
     if unknown:
@@ -128,4 +134,6 @@ def build_model(kind: str = "segmented", body_size: Any = 50, **overrides) -> Ar
     if not isinstance(kind, str):
         raise ValueError(f"model kind must be a string, got {kind!r}")  # noqa: TRY004
     size = resolve_body_size(body_size)
-    return ArmModel(build_tree(kind, load_description(), size, **overrides))
+    desc = load_description()
+    tree = build_tree(kind, desc, size, placement=placement, **overrides)
+    return ArmModel(tree, resolve_placement(kind, desc, size, placement, **overrides))
