@@ -100,19 +100,24 @@ def headline_table(r: dict) -> str:
                    f"leaves out movements whose reference peak-to-peak is under "
                    f"{pc(r['ptp_floor_fraction'])} % of the DOF's range over all movements "
                    f"(pro/sup: {exc['pro_sup']} left out, elbow: {exc['elbow_flexion']}, wrist: "
-                   f"{exc['wrist_flexion']} + {exc['wrist_deviation']}); global = RMSE / that range.")]
+                   f"{exc['wrist_flexion']} + {exc['wrist_deviation']}); global = RMSE / that range. "
+                   f"Run: {r['machine']}, load average {r['load_average']['start'][0]:.1f} at the start, "
+                   f"{r['wall_time_s']:.0f} s inside reproduce_paper (cache: {r['cache']['hits']} "
+                   f"results reused, {r['cache']['misses']} computed).")]
     return "\n".join(lines)
 
 
 def placements_table(r: dict) -> str:
     lines = [("| placement | split | split rule | axis offset at the elbow (mm, ant, lat) | at the wrist (mm) "
-             "| fitted parameters |"), "|---|---|---|---|---|---|"]
+              "| axis to the cylinder's | axis to MoBL's pro/sup | fitted parameters |"),
+             "|---|---|---|---|---|---|---|---|"]
     for name in ("paper", "parallel", "oblique"):
         v = r["variants"][name]
         p = v["placement"]
         default = " **(default)**" if name == r["default_placement"] else ""
         lines.append(f"| `{name}`{default} | {p['split']:.3f} | {p['split_rule']} | "
                      f"{mm(p['axis_offset_proximal'])} | {mm(p['axis_offset_distal'])} | "
+                     f"{v['axis_angle_to_cylinder_deg']:.2f}° | {v['axis_angle_to_mobl_deg']:.2f}° | "
                      f"{v['fitted_parameters']} |")
     return "\n".join(lines)
 
@@ -151,7 +156,7 @@ def claims_table(r: dict) -> str:
          ("With the axis on the centreline the split cannot matter (see row 1). The fit turns "
           f"{pc(1 - r['variants'][ob]['placement']['split'])} % of the cylinder with pro/sup, the "
           f"rule {pc(1 - r['variants'][pa]['placement']['split'])} % (on the centreline): the rule "
-          "matches the radius's inertia, the fit also the radius's and hand's gravity torque.")),
+          "matches an inertia, the fit is chosen for the torques.")),
         ("Errors grow with body size (numerical integration)",
          (f"Oblique pro/sup median {sizes[0]} / {sizes[1]} / {sizes[2]} % at the 5th / 50th / 95th; "
           "held out across sizes: see the validation table"),
