@@ -202,3 +202,44 @@ def test_reproduce_paper_reuses_its_cache_and_reproduces_the_committed_numbers(t
                             name, size, group, metric, k)
     for name in ("fig3.png", "fig4.png", "fig5.png"):
         assert (tmp_path / name).stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    ({"kind": "segmented", "placement": "diagonal"}, "placement must be one of"),
+    ({"kind": "solid", "placement": "paper"}, "solid model has no placement"),
+    ({"kind": "anatomical", "placement": "paper"}, "solid and segmented models only"),
+    ({"kind": "segmented", "cylinder": "hollow"}, "cylinder must be one of"),
+])
+def test_bad_placement_is_refused_with_a_clear_error(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        build_model(**kwargs)
+
+
+def test_placement_overrides_are_reported_as_custom():
+    m = build_model("segmented", placement="parallel", axis_offset_proximal=[-0.01, 0.0],
+                    axis_offset_distal=[-0.01, 0.0])
+    assert m.placement.name == "custom" and m.placement.split_rule == "radius_inertia"
+    assert m.placement.split != build_model("segmented", placement="parallel").placement.split
+    assert build_model("segmented").placement.name == load_description().simplified.default_placement
+
+
+def test_fit_cache_is_keyed_by_inputs_but_not_by_the_placements_it_writes(tmp_path, monkeypatch):
+    from forearm_dynamics.analysis import placement
+
+    for f in (ROOT / "config").glob("*.yaml"):
+        shutil.copy(f, tmp_path / f.name)
+    monkeypatch.setattr(placement, "config_file", lambda name: tmp_path / name)
+    d0 = placement.inputs_digest()
+    text = (tmp_path / "model.yaml").read_text(encoding="utf-8")
+    moved = text.replace("default_placement: oblique", "default_placement: paper")
+    assert moved != text
+    (tmp_path / "model.yaml").write_text(moved, encoding="utf-8")
+    assert placement.inputs_digest() == d0  # the fits do not read the placements
+    (tmp_path / "model.yaml").write_text(text.replace("thickness_fraction: 0.34", "thickness_fraction: 0.35"),
+                                         encoding="utf-8")
+    assert placement.inputs_digest() != d0
+    cache = placement.FitCache(tmp_path / "cache.json")
+    calls = []
+    value = cache.get_or_compute({"a": 1}, lambda: calls.append(1) or {"x": 2})
+    again = placement.FitCache(tmp_path / "cache.json").get_or_compute({"a": 1}, lambda: calls.append(1))
+    assert value == again == {"x": 2} and calls == [1]
