@@ -183,9 +183,9 @@ def test_anatomical_model_reproduces_the_reference(results):
 
 
 def test_reproduce_paper_reuses_its_cache_and_reproduces_the_committed_numbers(tmp_path, results):
-    """A user's run: no terminal (no progress bar), the committed cache, the same numbers."""
+    """A user's run into a new folder: no terminal (no progress bar), the committed cache
+    (seeded from the checkout), the same numbers."""
     pytest.importorskip("matplotlib")
-    shutil.copy(RESULTS / "cache.json", tmp_path / "cache.json")
     r = subprocess.run([sys.executable, "-m", "forearm_dynamics.cli.reproduce_paper", "--out",
                         str(tmp_path)], capture_output=True, text=True, timeout=600, check=False)
     assert r.returncode == 0, r.stderr[-2000:]
@@ -202,6 +202,7 @@ def test_reproduce_paper_reuses_its_cache_and_reproduces_the_committed_numbers(t
                             name, size, group, metric, k)
     for name in ("fig3.png", "fig4.png", "fig5.png"):
         assert (tmp_path / name).stat().st_size > 10_000
+    assert (tmp_path / "cache.json").stat().st_size > 1000  # the run's own copy
 
 
 @pytest.mark.parametrize("kwargs,message", [

@@ -197,15 +197,18 @@ class FitCache:
     spec and inputs_digest(): change a config file, the reference or the objective and the
     entry is simply not found (and recomputed)."""
 
-    def __init__(self, path: Path | None):
+    def __init__(self, path: Path | None, seed: Path | None = None):
+        """path: the cache file (read and written); seed: read when path does not exist yet
+        (e.g. the checkout's committed cache for a run into another folder)."""
         self.path = path
         self.digest = inputs_digest()
         self.entries: dict = {}
         self.used: set[str] = set()
         self.hits = self.misses = 0
-        if path is not None and path.is_file():
+        source = path if path is not None and path.is_file() else seed
+        if source is not None and source.is_file():
             try:
-                self.entries = json.loads(path.read_text(encoding="utf-8")).get("entries", {})
+                self.entries = json.loads(source.read_text(encoding="utf-8")).get("entries", {})
             except (OSError, ValueError):
                 self.entries = {}  # unreadable cache: recompute everything
 
