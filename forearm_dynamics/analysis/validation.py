@@ -14,7 +14,7 @@ from ..movements import movement_library
 from .errors import summarize
 from .placement import VARIANTS, FitCache, Scorer, fit, start_of
 
-VALIDATED = ("parallel", "oblique")
+VALIDATED = ("solid_parallel_axis", "parallel", "solid_fitted_axis", "oblique")
 
 
 def halves() -> dict[str, tuple[tuple[int, ...], tuple[int, ...]]]:
