@@ -43,4 +43,4 @@ reference: setup
 	$(VENV)/bin/make_reference
 
 reproduce: setup
-	$(VENV)/bin/reproduce_paper --out out/paper
+	$(VENV)/bin/reproduce_paper --out results/paper --readme README.md

@@ -68,11 +68,43 @@ class AnatomicalForearm:
     wrist_centre: np.ndarray  # in the radius frame
 
 
+#: The split rule of the paper's placements: the distal part's moment of inertia about the
+#: pro/sup axis equals the radius's about MoBL's pro/sup axis (paper Sec. IV).
+RADIUS_INERTIA = "radius_inertia"
+
+
+@dataclass(frozen=True)
+class PlacementSpec:
+    """One named joint placement of config/model.yaml `simplified.placements`."""
+
+    name: str
+    split: float | str  # fraction of the length, or RADIUS_INERTIA (computed by the builder)
+    axis_offset_proximal: np.ndarray  # (anterior, lateral), m at the 50th percentile
+    axis_offset_distal: np.ndarray
+    fitted: tuple[str, ...]  # which coordinates were fitted to the reference (documentation)
+
+
 @dataclass(frozen=True)
 class SimplifiedForearm:
-    split: float
-    axis_offset_proximal: np.ndarray  # (anterior, lateral), m
-    axis_offset_distal: np.ndarray
+    placements: dict[str, PlacementSpec]
+    default_placement: str
+
+    @property
+    def default(self) -> PlacementSpec:
+        return self.placements[self.default_placement]
+
+    # The default placement's numbers (what build_model("segmented") uses).
+    @property
+    def split(self) -> float | str:
+        return self.default.split
+
+    @property
+    def axis_offset_proximal(self) -> np.ndarray:
+        return self.default.axis_offset_proximal
+
+    @property
+    def axis_offset_distal(self) -> np.ndarray:
+        return self.default.axis_offset_distal
 
 
 @dataclass(frozen=True)
@@ -128,6 +160,19 @@ def _ranges(raw: dict) -> dict[str, tuple[float, float]]:
     return out
 
 
+def _simplified(raw: dict) -> SimplifiedForearm:
+    placements = {}
+    for name, p in raw["placements"].items():
+        split = p["split"] if p["split"] == RADIUS_INERTIA else float(p["split"])
+        placements[name] = PlacementSpec(
+            name, split, np.array(p["axis_offset_proximal"], float),
+            np.array(p["axis_offset_distal"], float), tuple(p.get("fitted", ())))
+    default = raw["default_placement"]
+    if default not in placements:
+        raise ValueError(f"model.yaml: default_placement {default!r} is not one of {sorted(placements)}")
+    return SimplifiedForearm(placements, default)
+
+
 @lru_cache(maxsize=1)
 def load_description() -> ModelDescription:
     """Parse config/model.yaml once; callers get the same frozen object."""
@@ -148,11 +193,7 @@ def load_description() -> ModelDescription:
             radioulnar_axis=_unit(a["radioulnar"]["axis"]),
             wrist_centre=np.array(a["wrist_centre"], float),
         ),
-        simplified=SimplifiedForearm(
-            split=float(s["split"]),
-            axis_offset_proximal=np.array(s["axis_offset_proximal"], float),
-            axis_offset_distal=np.array(s["axis_offset_distal"], float),
-        ),
+        simplified=_simplified(s),
         hand=HandDescription(
             mass=mass,
             length_fraction={k: dict(v) for k, v in h["length_fraction"].items()},

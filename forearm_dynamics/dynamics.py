@@ -9,13 +9,13 @@ import numpy as np
 import pinocchio as pin
 
 from .anthropometry import BodySize, resolve_body_size
-from .builders import build_tree
+from .builders import ForearmPlacement, build_tree, resolve_placement
 from .description import load_description
 from .hand import grasp_point
 from .payload import Payload, make_payload
 from .tree import KinematicTree
 
-_OVERRIDES = ("split", "axis_offset_proximal", "axis_offset_distal")
+_OVERRIDES = ("split", "axis_offset_proximal", "axis_offset_distal", "cylinder")
 
 
 def pinocchio_model(tree: KinematicTree) -> pin.Model:
@@ -54,8 +54,10 @@ def pinocchio_model(tree: KinematicTree) -> pin.Model:
 class ArmModel:
     """A built model: joint names, inverse dynamics, URDF export."""
 
-    def __init__(self, tree: KinematicTree):
+    def __init__(self, tree: KinematicTree, placement: ForearmPlacement | None = None):
         self.tree = tree
+        #: how the forearm was built (name, split, axis offsets); None for the anatomical model
+        self.placement = placement
         self.kind = tree.kind
         self.body_size: BodySize = tree.body_size
         self.side: str = tree.side
@@ -139,6 +141,7 @@ def build_model(
     payload_mass: float = 0.0,
     payload_com=None,
     payload_inertia=None,
+    placement: str | None = None,
     **overrides,
 ) -> ArmModel:
     """Build one of the three 20-DOF models.
@@ -149,8 +152,10 @@ def build_model(
     and signs). payload_mass (kg), payload_com ((x, y, z) m in the hand frame; None = the
     default power-grasp point, hand.grasp_point), payload_inertia (None = point mass, or
     (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) kg·m² about the payload COM): an object held in the hand,
-    see payload.py for the frame. overrides (simplified models only): split,
-    axis_offset_proximal, axis_offset_distal.
+    see payload.py for the frame. placement (segmented only): "paper", "parallel" or
+    "oblique" (config/model.yaml); None = the config's default_placement. The built model's
+    `placement` says which. overrides (simplified models only): split,
+    axis_offset_proximal, axis_offset_distal, cylinder ("uniform" | "mass_matched").
     """
     unknown = set(overrides) - set(_OVERRIDES)
     if unknown:
@@ -160,4 +165,5 @@ def build_model(
     size = resolve_body_size(body_size)
     desc = load_description()
     payload = make_payload(payload_mass, payload_com, payload_inertia, grasp_point(desc, size))
-    return ArmModel(build_tree(kind, desc, size, side=side, payload=payload, **overrides))
+    tree = build_tree(kind, desc, size, placement=placement, side=side, payload=payload, **overrides)
+    return ArmModel(tree, resolve_placement(kind, desc, size, placement, **overrides))

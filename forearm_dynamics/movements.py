@@ -86,10 +86,38 @@ def _expand(spec: dict, mapping: dict | None) -> list[tuple[str, str]]:
     return out
 
 
-@lru_cache(maxsize=1)
-def movement_library() -> tuple[Movement, ...]:
-    """The 65 movements in id order."""
+#: Three readings of the paper's "stop at 45 % of the maximal or minimal range" (the
+#: fraction is config/movements.yaml `stop_fraction`); `stop_rule` there picks the default.
+STOP_RULES = {
+    "toward_limit": "neutral + f x (limit - neutral): f of the way from neutral to the limit",
+    "of_limit": "f x limit: f times the limit angle itself",
+    "of_range": "neutral +/- f x (upper - lower): f of the full range from neutral",
+}
+
+
+def stop_angle(rule: str, frac: float, start: float, lo: float, hi: float, toward: str) -> float:
+    """Where a DOF moving from `start` toward its `toward` ("max"/"min") limit stops."""
+    limit = hi if toward == "max" else lo
+    if rule == "toward_limit":
+        return start + frac * (limit - start)
+    if rule == "of_limit":
+        return frac * limit
+    if rule == "of_range":
+        return start + (1.0 if toward == "max" else -1.0) * frac * (hi - lo)
+    raise ValueError(f"stop rule must be one of {tuple(STOP_RULES)}, got {rule!r}")
+
+
+@lru_cache(maxsize=4)
+def movement_library(stop_rule: str | None = None) -> tuple[Movement, ...]:
+    """The 65 movements in id order.
+
+    stop_rule: None = config/movements.yaml's (today "toward_limit"); the other readings
+    (STOP_RULES) are for the analysis's sensitivity study.
+    """
     spec = _spec()
+    rule = default_stop_rule() if stop_rule is None else stop_rule
+    if rule not in STOP_RULES:
+        raise ValueError(f"stop rule must be one of {tuple(STOP_RULES)}, got {rule!r}")
     ranges = load_description().ranges
     lo = np.array([ranges[n][0] for n in JOINT_NAMES])
     hi = np.array([ranges[n][1] for n in JOINT_NAMES])
@@ -105,8 +133,7 @@ def movement_library() -> tuple[Movement, ...]:
         stop = base.copy()
         for n, where in _expand(spec, hm["move"]):
             i = _INDEX[n]
-            limit = {"max": hi[i], "min": lo[i]}[where]
-            stop[i] = base[i] + frac * (limit - base[i])
+            stop[i] = stop_angle(rule, frac, base[i], lo[i], hi[i], where)
         for k, cond in enumerate(spec["elbow_conditions"]):
             start_m, stop_m = base.copy(), stop.copy()
             e0, e1 = np.deg2rad(cond["elbow_deg"])
@@ -132,6 +159,10 @@ def get_movement(movement_id: int) -> Movement:
     if not isinstance(movement_id, (int, np.integer)) or not 1 <= movement_id <= len(lib):
         raise ValueError(f"movement id must be an integer 1..{len(lib)}, got {movement_id!r}")
     return lib[int(movement_id) - 1]
+
+
+def default_stop_rule() -> str:
+    return str(_spec().get("stop_rule", "toward_limit"))
 
 
 def default_rate_hz() -> float:

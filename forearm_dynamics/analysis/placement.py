@@ -1,100 +1,238 @@
-"""Where to split the forearm and where to put the pro/sup axis: the paper's joint placement.
+"""The model variants of the comparison, and fitting their free placement coordinates.
 
-Objective: mean over the 65 movements of the pro/sup NRMSE plus that of the elbow, each
-normalised by the DOF's peak-to-peak over all movements (nrmse_global). Per-movement
-normalisation would let the few movements with a near-still pro/sup or elbow torque (a tiny
-peak-to-peak) dominate the optimum; the global one weighs every movement by its N·m error.
+Every variant says how many coordinates were fitted to the anatomical reference, so a table
+can compare models with equal freedom. The fits minimise OBJECTIVE (below) with Nelder-Mead
+and are cached in a JSON file keyed by everything they depend on (FitCache).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import hashlib
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize, minimize_scalar
+from scipy.optimize import minimize
 
-from ..dynamics import build_model
+from ..anthropometry import resolve_body_size
+from ..builders import build_tree, resolve_placement
+from ..description import ModelDescription, load_description
+from ..dynamics import ArmModel
+from ..paths import config_file
+from ..reference import REFERENCE_FILE
 from .comparison import Trials, compare
+from .errors import ErrorSet
 
+#: What every fit minimises (also written to results.json and the README).
+OBJECTIVE = ("mean over the movements of the pro/sup NRMSE plus the mean of the elbow NRMSE, "
+             "each normalised by that DOF's reference peak-to-peak over all 65 movements "
+             "(global normalisation: a movement with a near-constant torque cannot dominate)")
 CM = 0.01  # the optimiser works in cm so every coordinate has a similar scale
+FIT_VERSION = 2  # bump when the objective or the optimiser changes: the cache is refitted
+NM_OPTIONS = {"xatol": 5e-3, "fatol": 1e-6, "maxfev": 600}
 
 
 @dataclass(frozen=True)
-class Placement:
-    split: float = 0.0
-    axis_offset_proximal: tuple[float, float] = (0.0, 0.0)  # (anterior, lateral), m
-    axis_offset_distal: tuple[float, float] = (0.0, 0.0)
+class Variant:
+    """One model of the comparison. free: fitted coordinates ("split", "proximal", "distal":
+    a 2-D axis offset at that end, "offset": one 2-D offset used at both ends = an axis
+    parallel to the cylinder)."""
 
-    def overrides(self) -> dict:
-        return {"split": self.split, "axis_offset_proximal": list(self.axis_offset_proximal),
-                "axis_offset_distal": list(self.axis_offset_distal)}
+    name: str
+    kind: str  # "solid" | "segmented"
+    label: str
+    free: tuple[str, ...] = ()
+    placement: str | None = None  # named placement of config/model.yaml (segmented)
+    cylinder: str = "uniform"
+    start: tuple = ()  # where a fit starts: split and offsets (m) in `free` order
 
-    def as_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
-
-
-def model_of(p: Placement, body_size=50):
-    kind = "solid" if p.split == 0.0 else "segmented"
-    ov = p.overrides()
-    if kind == "solid":
-        ov.pop("split")
-    return build_model(kind, body_size=body_size, **ov)
+    @property
+    def n_fitted(self) -> int:
+        return sum(1 if f == "split" else 2 for f in self.free)
 
 
-def objective(p: Placement, reference: np.ndarray, trials: Trials, body_size=50) -> float:
-    e = compare(model_of(p, body_size), reference, trials)
+VARIANTS: dict[str, Variant] = {v.name: v for v in (
+    Variant("solid", "solid", "solid (paper: pro/sup about the cylinder's axis)"),
+    Variant("solid_mass_matched", "solid", "solid, mass-matched cylinder (COM = ulna + radius)",
+            cylinder="mass_matched"),
+    Variant("paper", "segmented", "segmented, paper placement (axis on the centreline)",
+            placement="paper"),
+    Variant("solid_parallel_axis", "solid", "solid, parallel axis fitted", ("offset",),
+            start=((-0.008, 0.008),)),
+    Variant("parallel", "segmented", "segmented, parallel axis fitted (paper's split rule)",
+            ("offset",), placement="parallel", start=((-0.008, 0.008),)),
+    Variant("solid_fitted_axis", "solid", "solid, oblique axis fitted", ("proximal", "distal"),
+            start=((0.0, 0.015), (-0.015, 0.0))),
+    Variant("oblique", "segmented", "segmented, oblique axis + split fitted (extension)",
+            ("split", "proximal", "distal"), placement="oblique",
+            start=(0.6, (0.0, 0.015), (-0.015, 0.002))),
+)}
+#: The rows of the headline table, in order of fitted parameters.
+HEADLINE = ("solid", "solid_mass_matched", "paper", "solid_parallel_axis", "parallel",
+            "solid_fitted_axis", "oblique")
+
+
+def fitted_overrides(v: Variant, x: np.ndarray) -> dict:
+    """Optimiser coordinates (split, offsets in cm) -> build overrides (offsets in m)."""
+    out, k = {}, 0
+    for f in v.free:
+        if f == "split":
+            out["split"] = float(np.clip(x[k], 0.0, 1.0))
+            k += 1
+        else:
+            off = [float(x[k]) * CM, float(x[k + 1]) * CM]
+            keys = ("proximal", "distal") if f == "offset" else (f,)
+            for end in keys:
+                out[f"axis_offset_{end}"] = off
+            k += 2
+    return out
+
+
+def _x0(v: Variant) -> tuple[np.ndarray, np.ndarray]:
+    """Start point and an initial simplex (3 mm steps, 0.05 in split)."""
+    x0, steps = [], []
+    for f, s in zip(v.free, v.start, strict=True):
+        if f == "split":
+            x0.append(float(s))
+            steps.append(0.05)
+        else:
+            x0 += [s[0] / CM, s[1] / CM]
+            steps += [0.3, 0.3]
+    x0 = np.array(x0)
+    simplex = np.vstack([x0] + [x0 + np.eye(len(x0))[i] * steps[i] for i in range(len(x0))])
+    return x0, simplex
+
+
+class Scorer:
+    """Scores model variants on a set of movements against filtered reference torques.
+
+    global_ptp: the normalising ranges (from all 65 movements), so a subset is scored on the
+    same scale. desc: a modified description (sensitivity cases); None = config/model.yaml.
+    """
+
+    def __init__(self, reference: np.ndarray, trials: Trials, global_ptp: np.ndarray,
+                 body_size=50, desc: ModelDescription | None = None):
+        self.reference, self.trials, self.global_ptp = reference, trials, global_ptp
+        self.size = resolve_body_size(body_size)
+        self.desc = desc or load_description()
+
+    def model(self, v: Variant, **overrides) -> ArmModel:
+        kw = {"cylinder": v.cylinder, **overrides}
+        if v.kind == "segmented":
+            kw["placement"] = v.placement
+        tree = build_tree(v.kind, self.desc, self.size, **kw)
+        return ArmModel(tree, resolve_placement(v.kind, self.desc, self.size, **kw))
+
+    def anatomical_model(self) -> ArmModel:
+        return ArmModel(build_tree("anatomical", self.desc, self.size))
+
+    def errors(self, v: Variant, **overrides) -> ErrorSet:
+        return self.errors_of_model(self.model(v, **overrides))
+
+    def errors_of_model(self, model: ArmModel) -> ErrorSet:
+        return compare(model, self.reference, self.trials, self.global_ptp)
+
+    def objective(self, v: Variant, **overrides) -> float:
+        return objective_of(self.errors(v, **overrides))
+
+    def subset(self, movement_ids) -> Scorer:
+        rows = [self.trials.movement_ids.index(i) for i in movement_ids]
+        out = Scorer(self.reference[rows], self.trials.subset(movement_ids), self.global_ptp,
+                     self.size, self.desc)
+        return out
+
+
+def objective_of(e: ErrorSet) -> float:
     return float(np.nanmean(e.nrmse_global[:, 1]) + np.nanmean(e.nrmse_global[:, 0]))
 
 
-def _placement(x: np.ndarray, free: tuple[str, ...], base: Placement) -> Placement:
-    vals = base.as_dict()
-    k = 0
-    if "split" in free:
-        vals["split"] = float(np.clip(x[k], 0.0, 1.0))
-        k += 1
-    for end in ("proximal", "distal"):
-        if end in free:
-            vals[f"axis_offset_{end}"] = (float(x[k]) * CM, float(x[k + 1]) * CM)
-            k += 2
-    return Placement(vals["split"], tuple(vals["axis_offset_proximal"]),
-                     tuple(vals["axis_offset_distal"]))
-
-
-def optimise(reference: np.ndarray, trials: Trials, free: tuple[str, ...],
-             start: Placement, body_size=50, callback=None) -> tuple[Placement, float, int]:
-    """Nelder-Mead over the free coordinates (split in [0, 1]; offsets within ±5 cm)."""
-    if free == ("split",):
-        r = minimize_scalar(lambda s: objective(_placement(np.array([s]), free, start), reference,
-                                                trials, body_size),
-                            bounds=(0.0, 1.0), method="bounded", options={"xatol": 1e-3})
-        return _placement(np.array([r.x]), free, start), float(r.fun), int(r.nfev)
-    x0, bounds = [], []
-    if "split" in free:
-        x0.append(start.split)
-        bounds.append((0.0, 1.0))
-    for end in ("proximal", "distal"):
-        if end in free:
-            x0 += [v / CM for v in getattr(start, f"axis_offset_{end}")]
-            bounds += [(-5.0, 5.0)] * 2
+def fit(v: Variant, scorer: Scorer, start: tuple | None = None, callback=None) -> dict:
+    """Nelder-Mead over the variant's free coordinates; {overrides, objective, evaluations}."""
+    if not v.free:
+        raise ValueError(f"variant {v.name!r} has nothing to fit")
+    x0, simplex = _x0(replace(v, start=start) if start else v)
 
     def f(x):
         if callback:
             callback()
-        return objective(_placement(x, free, start), reference, trials, body_size)
+        return scorer.objective(v, **fitted_overrides(v, x))
 
-    r = minimize(f, np.array(x0, float), method="Nelder-Mead", bounds=bounds,
-                 options={"xatol": 1e-3, "fatol": 1e-7, "maxfev": 800})
-    return _placement(r.x, free, start), float(r.fun), int(r.nfev)
+    r = minimize(f, x0, method="Nelder-Mead", options={**NM_OPTIONS, "initial_simplex": simplex})
+    return {"overrides": fitted_overrides(v, r.x), "objective": float(r.fun), "evaluations": int(r.nfev)}
 
 
-def error_surface(reference: np.ndarray, trials: Trials, at: Placement, splits: np.ndarray,
-                  distal_anterior: np.ndarray, callback=None) -> np.ndarray:
-    """Objective over split x the distal anterior offset, the other coordinates at `at`."""
-    out = np.empty((len(splits), len(distal_anterior)))
-    for i, s in enumerate(splits):
-        for j, d in enumerate(distal_anterior):
-            p = Placement(float(s), at.axis_offset_proximal, (float(d), at.axis_offset_distal[1]))
-            out[i, j] = objective(p, reference, trials)
-            if callback:
-                callback()
-    return out
+def start_of(v: Variant, overrides: dict) -> tuple:
+    """A fit's result as a start point for the same variant (e.g. at another body size)."""
+    out = []
+    for f in v.free:
+        if f == "split":
+            out.append(overrides["split"])
+        else:
+            out.append(tuple(overrides["axis_offset_proximal" if f == "offset" else f"axis_offset_{f}"]))
+    return tuple(out)
+
+
+def _model_yaml_without_placements() -> str:
+    """model.yaml minus its `simplified:` block: the fits write that block, not read it."""
+    text = config_file("model.yaml").read_text(encoding="utf-8")
+    a = text.find("\nsimplified:")
+    b = text.find("\n# ----", a + 1)
+    return text if a < 0 else text[:a] + text[b:]
+
+
+def inputs_digest() -> str:
+    """Hash of everything a fit depends on besides its own spec."""
+    h = hashlib.sha256()
+    h.update(f"fit-version {FIT_VERSION} {OBJECTIVE} {sorted(NM_OPTIONS.items())}".encode())
+    h.update(REFERENCE_FILE.read_bytes())
+    for name in ("movements.yaml", "analysis.yaml", "body_sizes.yaml"):
+        h.update(config_file(name).read_bytes())
+    h.update(_model_yaml_without_placements().encode())
+    return h.hexdigest()
+
+
+class FitCache:
+    """Fits and other expensive results in one JSON file, each under a key that hashes its
+    spec and inputs_digest(): change a config file, the reference or the objective and the
+    entry is simply not found (and recomputed)."""
+
+    def __init__(self, path: Path | None, seed: Path | None = None):
+        """path: the cache file (read and written); seed: read when path does not exist yet
+        (e.g. the checkout's committed cache for a run into another folder)."""
+        self.path = path
+        self.digest = inputs_digest()
+        self.entries: dict = {}
+        self.used: set[str] = set()
+        self.hits = self.misses = 0
+        source = path if path is not None and path.is_file() else seed
+        if source is not None and source.is_file():
+            try:
+                self.entries = json.loads(source.read_text(encoding="utf-8")).get("entries", {})
+            except (OSError, ValueError):
+                self.entries = {}  # unreadable cache: recompute everything
+
+    def key(self, spec: dict) -> str:
+        return hashlib.sha256((self.digest + json.dumps(spec, sort_keys=True)).encode()).hexdigest()[:24]
+
+    def get_or_compute(self, spec: dict, compute):
+        k = self.key(spec)
+        self.used.add(k)
+        if k in self.entries:
+            self.hits += 1
+            return self.entries[k]["value"]
+        self.misses += 1
+        value = compute()
+        self.entries[k] = {"spec": spec, "value": value}
+        self.save()
+        return value
+
+    def save(self, prune: bool = False) -> None:
+        """Write the file; prune=True keeps only the entries this run used (at the end)."""
+        if self.path is None:
+            return
+        live = {k: v for k, v in self.entries.items() if k in self.used} if prune else self.entries
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text(json.dumps({"inputs_digest": self.digest, "entries": live}, indent=1,
+                                  sort_keys=True), encoding="utf-8")
+        tmp.replace(self.path)
