@@ -55,6 +55,15 @@ INVALID = [
     ("torque_node", ["estimator.accel_cutoff_hz:=.nan"], "estimator.accel_cutoff_hz"),
     ("torque_node", ["estimator.velocity_cutoff_hz:=-1.0"], "estimator.velocity_cutoff_hz"),
     ("torque_node", ["estimator.velocity_cutoff_hz:=abc"], "estimator.velocity_cutoff_hz"),
+    ("torque_node", ["side:=up"], "side"),
+    ("torque_node", ["payload_mass:=-1.0"], "payload_mass"),
+    ("torque_node", ["payload_com:=[0.0,0.1]"], "payload_com"),
+    ("torque_node", ["payload_inertia:=[1.0,2.0]"], "payload_inertia"),
+    ("torque_node", ["placement:=sideways"], "placement"),
+    ("torque_node", ["estimator:=magic"], "estimator"),
+    ("torque_node", ["output_rate_hz:=-5.0"], "output_rate_hz"),
+    ("torque_node", ["input_timeout:=0.0"], "input_timeout"),
+    ("torque_node", ["split:=0.5", "model:=solid"], "split"),  # segmented only
     ("torque_node", ["input_topic:=''"], "input_topic"),
     ("torque_node", ["input_topic:=7"], "input_topic"),
     ("torque_node", ["output_topic:=joint_states"], "output_topic"),  # its own input
@@ -68,7 +77,7 @@ INVALID = [
     ("torque_node", ["executor:=3"], "executor"),
     ("torque_node", ["diagnostics_period:=-1.0"], "diagnostics_period"),
     ("torque_node", ["diagnostics_period:=.nan"], "diagnostics_period"),
-    ("torque_node", ["max_stamp_gap:=0.0"], "max_stamp_gap"),
+    ("torque_node", ["max_stamp_gap:=-1.0"], "max_stamp_gap"),  # 0 = adaptive: valid
     ("torque_node", ["max_stamp_gap:=.inf"], "max_stamp_gap"),
     ("trajectory_publisher", ["movements:=[1.5]"], "movements"),
     ("trajectory_publisher", ["movements:=[]"], "movements"),
