@@ -18,6 +18,7 @@ from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.description import load_description
+from forearm_dynamics.bag.model_config import model_from_config
 from forearm_dynamics.nodes.common import CONFIG_TOPIC, latched_qos, stream_qos
 
 MODEL = build_model("segmented", 50)
@@ -119,9 +120,12 @@ def test_config_is_latched(tn) -> None:
     cfg = json.loads(got[0].data)
     assert cfg["model"] == "segmented"
     assert cfg["body_size"]["label"] == "p50" and cfg["body_size"]["mass"] == 1.0
-    assert cfg["simplified"]["split"] == load_description().simplified.split
+    assert cfg["placement"]["split"] == load_description().simplified.split
+    assert cfg["placement"]["axis_offset_distal"] == load_description().simplified.axis_offset_distal.tolist()
     assert cfg["joint_names"] == list(JOINT_NAMES)
     assert cfg["version"] and cfg["estimator"]["settings"]["accel_cutoff_hz"] == 0.0
+    assert cfg["config_id"] == 1 and cfg["applies_from_stamp_ns"] == 0  # from the start
+    assert got[0] is not None and model_from_config(cfg).arm.kind == "segmented"  # strict reader
 
 
 def test_static_posture_gives_gravity_torques(tn) -> None:
@@ -282,19 +286,34 @@ def test_diagnostics_report_the_pipeline(tn) -> None:
                 "latency_us_p50", "latency_us_p99", "received_total", "rejected_total"):
         assert key in diag
     assert int(diag["received_total"]) == int(diag["processed_total"]) + int(diag["rejected_total"])
+    # the estimator states its lag at the observed period (1 ms, velocities given: dt/2)
+    assert diag["estimator"] == "backward" and diag["config_id"] == "1"
+    assert float(diag["estimator.lag_qdd_s"]) == pytest.approx(0.5e-3, abs=1e-9)
+    assert float(diag["estimator.lag_q_s"]) == 0.0
 
 
-def test_runtime_parameter_change_is_refused(tn) -> None:
+def _set(tn, name: str, value: ParameterValue):
     client = tn.peer.node.create_client(SetParameters, "/torque_node/set_parameters")
     assert client.wait_for_service(timeout_sec=10)
-    req = SetParameters.Request()
-    req.parameters = [Parameter(name="model", value=ParameterValue(
-        type=ParameterType.PARAMETER_STRING, string_value="solid"))]
-    future = client.call_async(req)
+    future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
     assert tn.peer.spin_until(future.done, 10)
-    result = future.result().results[0]
-    assert not result.successful and "start-up" in result.reason
     tn.peer.node.destroy_client(client)
+    return future.result().results[0]
+
+
+def test_read_only_and_invalid_live_changes_are_refused(tn) -> None:
+    """Transport parameters are read-only; a model parameter with an invalid value is
+    refused with the reason (valid live changes: test_torque_node_live.py)."""
+    r = _set(tn, "qos_depth", ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=10))
+    assert not r.successful and "read-only" in r.reason and "qos_depth" in r.reason
+    r = _set(tn, "model", ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="wooden"))
+    assert not r.successful and r.reason.startswith("invalid parameter 'model'"), r.reason
+    r = _set(tn, "body_size", ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=51))
+    assert not r.successful and "invalid parameter 'body_size'" in r.reason and "dict" not in r.reason
+    # the node runs on with the same model
+    msgs = [joint_state(tn.stamp(), POSTURE, np.zeros(20)) for _ in range(3)]
+    for reply in tn.exchange(msgs):
+        np.testing.assert_allclose(reply.effort, MODEL.gravity_torques(POSTURE), rtol=0, atol=1e-9)
 
 
 # -- null_echo_node -------------------------------------------------------------------------

@@ -32,7 +32,12 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.exceptions import (
     InvalidParameterTypeException,
     InvalidParameterValueException,
@@ -206,6 +211,8 @@ class Params:
             if isinstance(value, list) and isinstance(s.default, list) and not value and s.default:
                 raise ParameterError(s.name, f"must be a non-empty list of {_type_word(s.default)[10:]}")
 
+        node.add_on_set_parameters_callback(_refuse_system_changes)
+
     def warn_unknown(self) -> None:
         for name in self.unknown:
             self._node.get_logger().warning(
@@ -238,6 +245,15 @@ class Params:
                 raise ParameterError(name, f"{self.value(name)!r} is {resolved}, already the "
                                      f"{seen[resolved]}; it must be a topic of its own")
             seen[resolved] = f"topic of '{name}'"
+
+
+def _refuse_system_changes(params) -> SetParametersResult:
+    """use_sim_time etc. are not read-only in rclpy, but these nodes read them at start-up."""
+    for p in params:
+        if p.name in SYSTEM_PARAMETERS:
+            return SetParametersResult(successful=False, reason=f"{p.name} is read-only: set at "
+                                       "start-up (-p) only")
+    return SetParametersResult(successful=True)
 
 
 def finite(name: str, x: float) -> float:
