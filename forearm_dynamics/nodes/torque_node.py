@@ -64,6 +64,7 @@ from .torque_config import (
 )
 
 _time_ns = time.time_ns
+_PENDING = "__applies_from_stamp_ns__"  # placeholder in a prepared config text
 
 
 class TorqueNode(JointStreamNode):
@@ -76,6 +77,8 @@ class TorqueNode(JointStreamNode):
         super().__init__(node_name)
         self.config_pub = self.create_publisher(String, NODE_CONFIG_TOPIC, latched_qos())
         self._config_json = ""
+        self._config_text: dict[int, str] = {}
+        self._version = package_version()
         self._announce: ModelBundle | None = None  # installed, not yet stated with its stamp
         self._publish_config(self._bundle, 0)
         self._worker = _Builder(self)
@@ -149,8 +152,8 @@ class TorqueNode(JointStreamNode):
         """Called after an output is published while a new config awaits its first stamp."""
         b = self._announce
         if b is not None and b is self._bundle:
-            self._announce = None
-            self._publish_config(b, sec * 1_000_000_000 + nanosec)
+            self._announce = None  # the worker thread publishes it: no JSON work here
+            self._worker.announce(b, sec * 1_000_000_000 + nanosec)
 
     def _install(self, b: ModelBundle) -> bool:
         """Make `b` the bundle in use; True if its estimator is new (history reset)."""
@@ -261,7 +264,7 @@ class TorqueNode(JointStreamNode):
             "config_id": b.config_id,
             "applies_from_stamp_ns": applies_from,
             "node": self.get_fully_qualified_name(),
-            "version": package_version(),
+            "version": self._version,
             **b.model_config,
             "estimator": b.estimator.describe(dt, self._velocity_given),
             "input_topic": self.sub.topic_name if hasattr(self, "sub") else s.input_topic,
@@ -273,7 +276,15 @@ class TorqueNode(JointStreamNode):
         }
 
     def _publish_config(self, b: ModelBundle, applies_from: int | None) -> None:
-        text = json.dumps(self.config_message(b, applies_from))
+        """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None).
+
+        The text is prepared once per bundle (worker thread); applying it on the executor
+        thread is one string replacement and a publish.
+        """
+        if applies_from is None or b.config_id not in self._config_text:
+            self._config_text = {b.config_id: json.dumps(self.config_message(b, _PENDING))}
+        template = self._config_text[b.config_id]
+        text = template.replace(f'"{_PENDING}"', "null" if applies_from is None else str(applies_from))
         if applies_from is not None:
             self._config_json = text  # the one in force: republished with the diagnostics
         self.config_pub.publish(String(data=text))
@@ -319,6 +330,7 @@ class _Builder:
         self._node = node
         self._cv = threading.Condition()
         self._request: ModelRequest | None = None
+        self._announcements: list[tuple[ModelBundle, int]] = []
         self._stop = False
         self._thread = threading.Thread(target=self._run, name="model_builder", daemon=True)
         self._thread.start()
@@ -326,6 +338,12 @@ class _Builder:
     def submit(self, request: ModelRequest) -> None:
         with self._cv:
             self._request = request
+            self._cv.notify()
+
+    def announce(self, bundle: ModelBundle, stamp_ns: int) -> None:
+        """Publish `bundle`'s config as applied from `stamp_ns` (off the executor thread)."""
+        with self._cv:
+            self._announcements.append((bundle, stamp_ns))
             self._cv.notify()
 
     def stop(self) -> None:
@@ -337,15 +355,20 @@ class _Builder:
     def _run(self) -> None:
         while True:
             with self._cv:
-                while self._request is None and not self._stop:
+                while self._request is None and not self._announcements and not self._stop:
                     self._cv.wait()
                 if self._stop:
                     return
+                announcements, self._announcements = self._announcements, []
                 request, self._request = self._request, None
+            for bundle, stamp_ns in announcements:
+                self._node._publish_config(bundle, stamp_ns)
+            if request is None:
+                continue
             # While this thread holds the GIL the executor thread waits: hand it back often
             # (CPython's default switch interval is 5 ms, longer than a 1 kHz period).
             interval = sys.getswitchinterval()
-            sys.setswitchinterval(1e-4)
+            sys.setswitchinterval(1e-5)
             try:
                 self._node.build(request)
             finally:
