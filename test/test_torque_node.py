@@ -12,7 +12,7 @@ import pytest
 import rosproc
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
+from rcl_interfaces.srv import DescribeParameters, SetParameters
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -277,6 +277,43 @@ def test_stamp_gap_resets_the_estimator(tn) -> None:
     expect_torques(replies[2], q[2], qd[2], a)
     expect_torques(replies[3], q[3], qd[3], np.zeros(20))  # restarted: warm-up again
     tn.diag_after(lambda d: int(d["reset.stamp_gap"]) >= before + 2)  # this jump and the first
+
+
+def test_slow_streams_are_not_gaps(tn) -> None:
+    """The adaptive max_stamp_gap (default 0): a 20 Hz then 5 Hz stream keeps its history
+    (every sample after the first is a real estimate, exact for constant acceleration);
+    only the 0.5 s jump to the stream's first sample resets the estimator."""
+    before = int(tn.diag_after(lambda d: True)["reset.stamp_gap"])
+    dt = np.array([50] * 5 + [200] * 5) * MS  # 20 Hz, then 5 Hz
+    stamps, q, qd, a = constant_acceleration(10, dt, tn.stamp(500 * MS))
+    tn.t_ns = int(stamps[-1])
+    replies = tn.exchange([joint_state(s, qk, qdk) for s, qk, qdk in zip(stamps, q, qd, strict=True)])
+    assert len(replies) == 10
+    expect_torques(replies[0], q[0], qd[0], np.zeros(20))
+    for k in range(1, 10):
+        expect_torques(replies[k], q[k], qd[k], a)
+    assert int(tn.diag_after(lambda d: True)["reset.stamp_gap"]) == before + 1
+
+
+def test_parameters_are_described(tn) -> None:
+    """Descriptors as `ros2 param describe` shows them: units, ranges, read-only."""
+    client = tn.peer.node.create_client(DescribeParameters, "/torque_node/describe_parameters")
+    assert client.wait_for_service(timeout_sec=10)
+    names = ["qos_depth", "body_size", "payload_mass", "stature", "output_rate_hz",
+             "estimator.accel_cutoff_hz", "max_stamp_gap"]
+    future = client.call_async(DescribeParameters.Request(names=names))
+    assert tn.peer.spin_until(future.done, 10)
+    tn.peer.node.destroy_client(client)
+    d = dict(zip(names, future.result().descriptors, strict=True))
+    assert d["qos_depth"].read_only and "Read-only" in d["qos_depth"].description
+    assert (d["qos_depth"].integer_range[0].from_value, d["qos_depth"].integer_range[0].to_value) == (1, 100000)
+    assert not d["body_size"].read_only and d["body_size"].dynamic_typing
+    assert "[kg]" in d["payload_mass"].description and "[m]" in d["stature"].description
+    assert not d["payload_mass"].read_only and d["payload_mass"].floating_point_range[0].from_value == 0.0
+    assert d["output_rate_hz"].read_only and "[Hz]" in d["output_rate_hz"].description
+    assert "[Hz]" in d["estimator.accel_cutoff_hz"].description
+    assert not d["estimator.accel_cutoff_hz"].read_only
+    assert "[s]" in d["max_stamp_gap"].description and "QOS_NOTE" not in d["qos_depth"].description
 
 
 def test_diagnostics_report_the_pipeline(tn) -> None:
