@@ -181,7 +181,11 @@ class Params:
     def __init__(self, node: Node, specs: Iterable[Spec], config_name: str):
         self._node = node
         self.specs = {s.name: s for s in specs}
-        yaml_defaults = load_defaults(config_name)
+        try:
+            yaml_defaults = load_defaults(config_name)
+        except (OSError, yaml.YAMLError, ValueError) as exc:  # a broken install: one line
+            raise ParameterError(f"config/{config_name}.yaml", f"cannot read the defaults: "
+                                 f"{str(exc).splitlines()[0]}") from None
         extra = sorted(set(yaml_defaults) - set(self.specs))
         if extra:  # a typo in the installed file: a packaging bug, say so plainly
             raise ParameterError(extra[0], f"in config/{config_name}.yaml but not a parameter of "
