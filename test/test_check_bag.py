@@ -19,7 +19,7 @@ from std_msgs.msg import String
 from forearm_dynamics import build_model, get_movement
 from forearm_dynamics.bag import BagWriter, TopicQos
 from forearm_dynamics.cli.check_bag import main as check_bag
-from forearm_dynamics.nodes.torque_node import model_config
+from forearm_dynamics.nodes.torque_config import model_config
 from forearm_dynamics.reference import save_reference
 
 T_START = 1_750_000_000_000_000_000

@@ -1,13 +1,16 @@
 """Parameters of every node (torque_node, trajectory_publisher, null_echo_node,
 bag_recorder), as real processes: every parameter has invalid values that are refused at
-start (exit 2, the parameter named, no traceback), and runtime changes are refused clearly
-(all at once: set_parameters and set_parameters_atomically), leaving every value as it was
-and the node working. test_torque_node.py / test_trajectory_publisher.py /
+start (exit 2, the parameter named, no traceback, rclpy's own range check included); a
+runtime change of a read-only parameter is refused by rclpy ("read-only"), an invalid value
+of one torque_node accepts at runtime is refused with the reason naming it (one by one and
+set_parameters_atomically), leaving every value as it was and the node working
+(test_torque_node_live.py shows valid live changes). test_torque_node.py / test_trajectory_publisher.py /
 test_bag_recorder.py already check a few values; this file covers every parameter.
 """
 
 from __future__ import annotations
 
+import array
 import signal
 import time
 from pathlib import Path
@@ -55,6 +58,15 @@ INVALID = [
     ("torque_node", ["estimator.accel_cutoff_hz:=.nan"], "estimator.accel_cutoff_hz"),
     ("torque_node", ["estimator.velocity_cutoff_hz:=-1.0"], "estimator.velocity_cutoff_hz"),
     ("torque_node", ["estimator.velocity_cutoff_hz:=abc"], "estimator.velocity_cutoff_hz"),
+    ("torque_node", ["side:=up"], "side"),
+    ("torque_node", ["payload_mass:=-1.0"], "payload_mass"),
+    ("torque_node", ["payload_com:=[0.0,0.1]"], "payload_com"),
+    ("torque_node", ["payload_inertia:=[1.0,2.0]"], "payload_inertia"),
+    ("torque_node", ["placement:=sideways"], "placement"),
+    ("torque_node", ["estimator:=magic"], "estimator"),
+    ("torque_node", ["output_rate_hz:=-5.0"], "output_rate_hz"),
+    ("torque_node", ["input_timeout:=0.0"], "input_timeout"),
+    ("torque_node", ["split:=0.5", "model:=solid"], "split"),  # segmented only
     ("torque_node", ["input_topic:=''"], "input_topic"),
     ("torque_node", ["input_topic:=7"], "input_topic"),
     ("torque_node", ["output_topic:=joint_states"], "output_topic"),  # its own input
@@ -68,7 +80,7 @@ INVALID = [
     ("torque_node", ["executor:=3"], "executor"),
     ("torque_node", ["diagnostics_period:=-1.0"], "diagnostics_period"),
     ("torque_node", ["diagnostics_period:=.nan"], "diagnostics_period"),
-    ("torque_node", ["max_stamp_gap:=0.0"], "max_stamp_gap"),
+    ("torque_node", ["max_stamp_gap:=-1.0"], "max_stamp_gap"),  # 0 = adaptive: valid
     ("torque_node", ["max_stamp_gap:=.inf"], "max_stamp_gap"),
     ("trajectory_publisher", ["movements:=[1.5]"], "movements"),
     ("trajectory_publisher", ["movements:=[]"], "movements"),
@@ -197,11 +209,19 @@ def _values(peer, node: str) -> dict[str, ParameterMsg]:
     return dict(zip(names, got.values, strict=True))
 
 
-def _changed(name: str, value) -> ParameterMsg:
-    """A different value of the same type (the node refuses any change anyway)."""
+def _changed(name: str, value, spec=None) -> ParameterMsg:
+    """A different value of the same type: any value for a read-only parameter (refused as
+    such), an invalid one for a parameter torque_node accepts at runtime (`spec.live`)."""
     v = Parameter.from_parameter_msg(ParameterMsg(name=name, value=value)).value
+    if isinstance(v, array.array):  # double arrays come back as array.array
+        v = list(v)
+    live = spec is not None and spec.live
     if isinstance(v, bool):
         new = not v
+    elif live and name == "body_size":
+        new = 51  # not a tabulated percentile
+    elif live and isinstance(v, (int, float)):
+        new = type(v)(spec.hi * 2 + 1)  # out of rclpy's range
     elif isinstance(v, (int, float)):
         new = v + 1
     elif isinstance(v, str):
@@ -230,17 +250,20 @@ def test_runtime_changes_are_refused_and_change_nothing(tmp_path) -> None:
         report = []
         for node, p in nodes.items():
             before = _values(peer, node)
-            changes = [_changed(n, v) for n, v in before.items()]
+            specs = {sp.name: sp for sp in SPECS[node]}
+            changes = [_changed(n, v, specs.get(n)) for n, v in before.items()]
             res = _call(peer, SetParameters, f"/{node}/set_parameters",
                         SetParameters.Request(parameters=changes)).results
             assert len(res) == len(changes)
             for change, r in zip(changes, res, strict=True):
                 assert not r.successful, (node, change.name)
-                assert change.name in r.reason or "read-only" in r.reason, (node, change.name, r.reason)
-            own = [c for c in changes if c.name in {s.name for s in SPECS[node]}][:3]
+                assert change.name in r.reason, (node, change.name, r.reason)
+                live = change.name in specs and specs[change.name].live
+                assert live != ("read-only" in r.reason), (node, change.name, r.reason)
+            own = [c for c in changes if c.name in specs][:3]
             atomic = _call(peer, SetParametersAtomically, f"/{node}/set_parameters_atomically",
                            SetParametersAtomically.Request(parameters=own)).result
-            assert not atomic.successful and "start-up only" in atomic.reason, (node, atomic.reason)
+            assert not atomic.successful and "read-only" in atomic.reason, (node, atomic.reason)
             undeclared = _call(peer, SetParameters, f"/{node}/set_parameters", SetParameters.Request(
                 parameters=[Parameter("no_such_parameter", value=1).to_parameter_msg()])).results[0]
             assert not undeclared.successful

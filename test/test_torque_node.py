@@ -12,11 +12,12 @@ import pytest
 import rosproc
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
+from rcl_interfaces.srv import DescribeParameters, SetParameters
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES, build_model
+from forearm_dynamics.bag.model_config import model_from_config
 from forearm_dynamics.description import load_description
 from forearm_dynamics.nodes.common import CONFIG_TOPIC, latched_qos, stream_qos
 
@@ -119,9 +120,12 @@ def test_config_is_latched(tn) -> None:
     cfg = json.loads(got[0].data)
     assert cfg["model"] == "segmented"
     assert cfg["body_size"]["label"] == "p50" and cfg["body_size"]["mass"] == 1.0
-    assert cfg["simplified"]["split"] == load_description().simplified.split
+    assert cfg["placement"]["split"] == load_description().simplified.split
+    assert cfg["placement"]["axis_offset_distal"] == load_description().simplified.axis_offset_distal.tolist()
     assert cfg["joint_names"] == list(JOINT_NAMES)
     assert cfg["version"] and cfg["estimator"]["settings"]["accel_cutoff_hz"] == 0.0
+    assert cfg["config_id"] == 1 and cfg["applies_from_stamp_ns"] == 0  # from the start
+    assert got[0] is not None and model_from_config(cfg).arm.kind == "segmented"  # strict reader
 
 
 def test_static_posture_gives_gravity_torques(tn) -> None:
@@ -275,6 +279,43 @@ def test_stamp_gap_resets_the_estimator(tn) -> None:
     tn.diag_after(lambda d: int(d["reset.stamp_gap"]) >= before + 2)  # this jump and the first
 
 
+def test_slow_streams_are_not_gaps(tn) -> None:
+    """The adaptive max_stamp_gap (default 0): a 20 Hz then 5 Hz stream keeps its history
+    (every sample after the first is a real estimate, exact for constant acceleration);
+    only the 0.5 s jump to the stream's first sample resets the estimator."""
+    before = int(tn.diag_after(lambda d: True)["reset.stamp_gap"])
+    dt = np.array([50] * 5 + [200] * 5) * MS  # 20 Hz, then 5 Hz
+    stamps, q, qd, a = constant_acceleration(10, dt, tn.stamp(500 * MS))
+    tn.t_ns = int(stamps[-1])
+    replies = tn.exchange([joint_state(s, qk, qdk) for s, qk, qdk in zip(stamps, q, qd, strict=True)])
+    assert len(replies) == 10
+    expect_torques(replies[0], q[0], qd[0], np.zeros(20))
+    for k in range(1, 10):
+        expect_torques(replies[k], q[k], qd[k], a)
+    assert int(tn.diag_after(lambda d: True)["reset.stamp_gap"]) == before + 1
+
+
+def test_parameters_are_described(tn) -> None:
+    """Descriptors as `ros2 param describe` shows them: units, ranges, read-only."""
+    client = tn.peer.node.create_client(DescribeParameters, "/torque_node/describe_parameters")
+    assert client.wait_for_service(timeout_sec=10)
+    names = ["qos_depth", "body_size", "payload_mass", "stature", "output_rate_hz",
+             "estimator.accel_cutoff_hz", "max_stamp_gap"]
+    future = client.call_async(DescribeParameters.Request(names=names))
+    assert tn.peer.spin_until(future.done, 10)
+    tn.peer.node.destroy_client(client)
+    d = dict(zip(names, future.result().descriptors, strict=True))
+    assert d["qos_depth"].read_only and "Read-only" in d["qos_depth"].description
+    assert (d["qos_depth"].integer_range[0].from_value, d["qos_depth"].integer_range[0].to_value) == (1, 100000)
+    assert not d["body_size"].read_only and d["body_size"].dynamic_typing
+    assert "[kg]" in d["payload_mass"].description and "[m]" in d["stature"].description
+    assert not d["payload_mass"].read_only and d["payload_mass"].floating_point_range[0].from_value == 0.0
+    assert d["output_rate_hz"].read_only and "[Hz]" in d["output_rate_hz"].description
+    assert "[Hz]" in d["estimator.accel_cutoff_hz"].description
+    assert not d["estimator.accel_cutoff_hz"].read_only
+    assert "[s]" in d["max_stamp_gap"].description and "QOS_NOTE" not in d["qos_depth"].description
+
+
 def test_diagnostics_report_the_pipeline(tn) -> None:
     tn.exchange([joint_state(tn.stamp(), POSTURE, np.zeros(20)) for _ in range(20)])
     diag = tn.diag_after(lambda d: int(d["processed_total"]) > 20)
@@ -282,19 +323,34 @@ def test_diagnostics_report_the_pipeline(tn) -> None:
                 "latency_us_p50", "latency_us_p99", "received_total", "rejected_total"):
         assert key in diag
     assert int(diag["received_total"]) == int(diag["processed_total"]) + int(diag["rejected_total"])
+    # the estimator states its lag at the observed period (1 ms, velocities given: dt/2)
+    assert diag["estimator"] == "backward" and diag["config_id"] == "1"
+    assert float(diag["estimator.lag_qdd_s"]) == pytest.approx(0.5e-3, abs=1e-9)
+    assert float(diag["estimator.lag_q_s"]) == 0.0
 
 
-def test_runtime_parameter_change_is_refused(tn) -> None:
+def _set(tn, name: str, value: ParameterValue):
     client = tn.peer.node.create_client(SetParameters, "/torque_node/set_parameters")
     assert client.wait_for_service(timeout_sec=10)
-    req = SetParameters.Request()
-    req.parameters = [Parameter(name="model", value=ParameterValue(
-        type=ParameterType.PARAMETER_STRING, string_value="solid"))]
-    future = client.call_async(req)
+    future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
     assert tn.peer.spin_until(future.done, 10)
-    result = future.result().results[0]
-    assert not result.successful and "start-up" in result.reason
     tn.peer.node.destroy_client(client)
+    return future.result().results[0]
+
+
+def test_read_only_and_invalid_live_changes_are_refused(tn) -> None:
+    """Transport parameters are read-only; a model parameter with an invalid value is
+    refused with the reason (valid live changes: test_torque_node_live.py)."""
+    r = _set(tn, "qos_depth", ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=10))
+    assert not r.successful and "read-only" in r.reason and "qos_depth" in r.reason
+    r = _set(tn, "model", ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="wooden"))
+    assert not r.successful and r.reason.startswith("invalid parameter 'model'"), r.reason
+    r = _set(tn, "body_size", ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=51))
+    assert not r.successful and "invalid parameter 'body_size'" in r.reason and "dict" not in r.reason
+    # the node runs on with the same model
+    msgs = [joint_state(tn.stamp(), POSTURE, np.zeros(20)) for _ in range(3)]
+    for reply in tn.exchange(msgs):
+        np.testing.assert_allclose(reply.effort, MODEL.gravity_torques(POSTURE), rtol=0, atol=1e-9)
 
 
 # -- null_echo_node -------------------------------------------------------------------------

@@ -1,25 +1,35 @@
-"""Rebuild the model a torque node ran, from its latched `torque_node/config` JSON.
+"""Rebuild the model a torque node ran, from its config message (`<node>/config`, JSON).
 
-Tolerant of the key variants seen so far: "model" or "kind"; "body_size" as a percentile
-(50, "50", "p50"), as scale factors {"label", "forearm", "hand_length", "hand_breadth",
-"mass"} (what torque_node publishes), {"percentile": 50} or raw anthropometry
-{"stature", "body_mass", ...}; overrides under "simplified" or at the top level.
+The reader is strict: the message must have exactly the keys torque_node writes
+(nodes/torque_config.py), each of the right kind; anything else is a ValueError naming the
+key, never a silent guess. The node republishes its config periodically and on every live
+change; each message carries `config_id` and `applies_from_stamp_ns` (the header stamp of
+the first output computed with it; 0 = from the start; null = built, not applied yet).
+`config_in_force` picks, for one sample stamp, the config that computed it.
 """
 
 from __future__ import annotations
 
+import inspect
 import re
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, fields
 
-import numpy as np
-
-from ..anthropometry import DIMENSIONS, BodySize, resolve_body_size
-from ..description import load_description
+from ..anthropometry import BodySize, resolve_body_size
 from ..dynamics import ArmModel, build_model
 
+CONFIG_SCHEMA = 2
 DEFAULT_KIND = "segmented"
 DEFAULT_SIZE = 50
-_SCALES = ("forearm", "hand_length", "hand_breadth", "mass")
+
+#: The model part (required) and the node part (optional: a bag writer may state only the
+#: model) of a config message.
+MODEL_KEYS = frozenset({"schema", "model", "body_size", "side", "payload", "placement", "joint_names"})
+NODE_KEYS = frozenset({"config_id", "applies_from_stamp_ns", "node", "version", "estimator",
+                       "input_topic", "output_topic", "max_stamp_gap", "output_rate_hz",
+                       "input_timeout", "build_ms"})
+PLACEMENT_KEYS = frozenset({"name", "split", "axis_offset_proximal", "axis_offset_distal"})
+PAYLOAD_KEYS = frozenset({"mass", "com", "inertia"})
 
 
 @dataclass
@@ -33,59 +43,99 @@ class ModelChoice:
         return f"{self.arm.kind}, body size {self.arm.body_size.label} (from {self.source})"
 
 
-def _percentile_of(label) -> int | None:
-    m = re.fullmatch(r"p?(\d+)(?:th)?", str(label).strip())
+def _require(cond: bool, what: str) -> None:
+    if not cond:
+        raise ValueError(f"config message: {what}")
+
+
+def _keys(d, allowed: frozenset, required: frozenset, where: str) -> None:
+    _require(isinstance(d, dict), f"{where} must be an object, got {type(d).__name__}")
+    unknown = sorted(set(d) - allowed)
+    _require(not unknown, f"unknown key(s) {unknown} in {where}")
+    missing = sorted(required - set(d))
+    _require(not missing, f"missing key(s) {missing} in {where}")
+
+
+def _percentile_of(label: str) -> int | None:
+    m = re.fullmatch(r"p(\d+)", label)
     return int(m.group(1)) if m else None
 
 
-def _body_size(value) -> tuple[BodySize, int | None]:
-    if isinstance(value, dict):
-        if all(k in value for k in _SCALES):
-            label = str(value.get("label", "custom"))
-            size = BodySize(label, *(float(value[k]) for k in _SCALES))
-            pct = _percentile_of(label)
-            if pct is not None and resolve_body_size(pct) != size:
+def _body_size(d) -> tuple[BodySize, int | None]:
+    names = {f.name for f in fields(BodySize)}
+    _keys(d, frozenset(names), frozenset(names), "body_size")
+    try:
+        size = BodySize(**{k: (str(v) if k == "label" else float(v)) for k, v in d.items()})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"config message: body_size: {exc}") from None
+    pct = _percentile_of(size.label)
+    if pct is not None:
+        try:
+            if resolve_body_size(pct) != size:
                 pct = None  # a label that does not match its scale factors: trust the factors
-            return size, pct
-        if "percentile" in value:
-            pct = int(value["percentile"])
-            return resolve_body_size(pct), pct
-        dims = {k: v for k, v in value.items() if k in DIMENSIONS}
-        return resolve_body_size(dims), None
-    pct = _percentile_of(value)
-    if pct is None:
-        raise ValueError(f"body_size {value!r} is neither a percentile nor a dict")
-    return resolve_body_size(pct), pct
+        except ValueError:
+            pct = None
+    return size, pct
 
 
-def _overrides(cfg: dict, kind: str) -> dict:
-    src = cfg.get("simplified") if isinstance(cfg.get("simplified"), dict) else cfg
-    keys = {"segmented": ("split", "axis_offset_proximal", "axis_offset_distal"),
-            "solid": ("axis_offset_proximal", "axis_offset_distal")}.get(kind, ())
-    out = {k: src[k] for k in keys if src.get(k) is not None}
-    if kind == "solid":
-        # torque_node states the description's (segmented) axis offsets for a solid model
-        # too, while build_model("solid") uses the cylinder's own axis unless told: offsets
-        # equal to those defaults say nothing about the solid model, so they are dropped.
-        s = load_description().simplified
-        defaults = {"axis_offset_proximal": s.axis_offset_proximal,
-                    "axis_offset_distal": s.axis_offset_distal}
-        out = {k: v for k, v in out.items() if not np.allclose(np.asarray(v, float), defaults[k])}
-    return out
+def _build_kwargs(cfg: dict) -> dict:
+    kw: dict = {}
+    placement = cfg["placement"]
+    if cfg["model"] == "anatomical":
+        _require(placement is None, "placement must be null for the anatomical model")
+    else:
+        _keys(placement, PLACEMENT_KEYS, frozenset(), "placement")
+        kw.update({k: v for k, v in placement.items() if k != "name"})
+        if placement.get("name"):
+            kw["placement"] = placement["name"]
+    _require(cfg["side"] in ("right", "left"), f"side {cfg['side']!r} is neither right nor left")
+    if cfg["side"] != "right":
+        kw["side"] = cfg["side"]
+    payload = cfg["payload"]
+    if payload is not None:
+        _keys(payload, PAYLOAD_KEYS, PAYLOAD_KEYS, "payload")
+        kw["payload_mass"] = float(payload["mass"])
+        kw["payload_com"] = tuple(payload["com"])
+        if payload["inertia"] is not None:
+            kw["payload_inertia"] = tuple(payload["inertia"])
+    accepted = inspect.signature(build_model).parameters
+    for k in ("side", "payload_mass", "placement"):
+        _require(k not in kw or k in accepted,
+                 f"it names {k} = {kw.get(k)!r}, which this forearm_dynamics cannot build")
+    return kw
 
 
 def model_from_config(cfg: dict | None) -> ModelChoice:
-    """The model of the config (ValueError if it names one that cannot be built)."""
+    """The model of the config (ValueError naming the problem if it cannot be read or built)."""
     if cfg is None:
         return ModelChoice(build_model(DEFAULT_KIND, DEFAULT_SIZE), DEFAULT_SIZE, "default",
                            [(f"no torque_node/config in the bag: assuming the {DEFAULT_KIND} "
                              f"model at body size {DEFAULT_SIZE}")])
-    kind = str(cfg.get("model") or cfg.get("kind") or DEFAULT_KIND)
-    warnings = [] if ("model" in cfg or "kind" in cfg) else \
-        [f"config names no model kind: assuming {DEFAULT_KIND}"]
-    size, pct = _body_size(cfg.get("body_size", DEFAULT_SIZE))
-    arm = build_model(kind, size, **_overrides(cfg, kind))
-    names = cfg.get("joint_names")
-    if names is not None and tuple(names) != arm.joint_names:
-        warnings.append("config joint_names differ from the model's; torques are matched by name")
-    return ModelChoice(arm, pct, "torque_node/config", warnings)
+    _keys(cfg, MODEL_KEYS | NODE_KEYS, MODEL_KEYS, "the message")
+    _require(cfg["schema"] == CONFIG_SCHEMA,
+             f"schema {cfg['schema']!r} (this forearm_dynamics reads schema {CONFIG_SCHEMA})")
+    size, pct = _body_size(cfg["body_size"])
+    arm = build_model(str(cfg["model"]), size, **_build_kwargs(cfg))
+    _require(tuple(cfg["joint_names"]) == arm.joint_names,
+             "joint_names differ from the model's (not this model's config)")
+    return ModelChoice(arm, pct, "torque_node/config", [])
+
+
+def config_in_force(configs: Sequence[tuple[int, dict]], stamp_ns: int) -> dict | None:
+    """The config that computed the output stamped `stamp_ns`.
+
+    configs: (log time ns, config message) in recording order (periodic repeats included).
+    The one in force is the applied config (applies_from_stamp_ns not null) with the latest
+    applies_from_stamp_ns <= stamp_ns (ties: the highest config_id). A config recorded with
+    no config_id (a writer that states only the model) applies to everything. None if no
+    config applies yet.
+    """
+    best, key = None, None
+    for _log, cfg in configs:
+        start = cfg.get("applies_from_stamp_ns", 0) if "config_id" in cfg else 0
+        if start is None or start > stamp_ns:
+            continue
+        k = (start, cfg.get("config_id", 0))
+        if key is None or k >= key:
+            best, key = cfg, k
+    return best

@@ -52,7 +52,7 @@ from ..bag import (
 from ..bag.schemas import message_class, type_name_of
 from ..bag.writer import COMPRESSION
 from .common import CONFIG_TOPIC, latched_qos, make_executor, spin, stream_qos
-from .params import ParameterError, Params, Spec
+from .params import ParameterError, Params, Spec, init_node
 
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
 KNOWN_TYPES: dict[str, type] = {
@@ -66,13 +66,19 @@ EXIT_BAD_PARAMETER = 2
 EXIT_WRITE_FAILED = 1
 
 SPECS = (
-    Spec("topics", list(DEFAULT_TOPICS), "topics to record: 'name' (known types) or 'name:pkg/msg/Type'"),
-    Spec("latched_topics", [CONFIG_TOPIC], "topics subscribed transient-local, depth 1"),
-    Spec("output", "", "MCAP file to create ('' = forearm_<date>_<time>.mcap here); never overwritten"),
-    Spec("qos_depth", 1000, "history depth of the stream subscriptions (reliable, volatile)"),
-    Spec("chunk_size", CHUNK_SIZE, "bytes (uncompressed) after which a chunk is closed"),
-    Spec("flush_period", FLUSH_PERIOD_S, "s after which an open chunk is closed anyway"),
-    Spec("compression", "zstd", "chunk compression: zstd, lz4 or none"),
+    Spec("topics", list(DEFAULT_TOPICS), "topics to record: 'name' (types known for the "
+         "pipeline's topics) or 'name:pkg/msg/Type'"),
+    Spec("latched_topics", [CONFIG_TOPIC], "topics subscribed reliable + transient-local "
+         "(depth 1), so a sample latched before the recorder started is recorded"),
+    Spec("output", "", "MCAP file to create ('' = forearm_<date>_<time>.mcap in the working "
+         "directory); an existing file is never overwritten"),
+    Spec("qos_depth", 1000, "history depth of the stream subscriptions (reliable, volatile)",
+         "messages", 1, 1_000_000),
+    Spec("chunk_size", CHUNK_SIZE, "a chunk is closed after this much uncompressed data",
+         "bytes", 1024, 1 << 30),
+    Spec("flush_period", FLUSH_PERIOD_S, "an open chunk is closed after this long anyway", "s",
+         0.01, 3600.0),
+    Spec("compression", "zstd", "chunk compression", choices=tuple(COMPRESSION)),
 )
 
 
@@ -86,7 +92,7 @@ class TopicPlan:
 
 
 def _strings(p: Params, name: str) -> list[str]:
-    v = p.raw(name)
+    v = p.value(name)
     if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) and x for x in v):
         raise ParameterError(name, f"must be a list of non-empty strings, got {v!r}")
     return list(v)
@@ -132,17 +138,15 @@ class BagRecorder(Node):
     """Raw subscriptions -> BagWriter; `done` completes when recording must stop (write failure)."""
 
     def __init__(self, node_name: str = "bag_recorder"):
-        super().__init__(node_name)
-        p = Params(self, SPECS)
-        p.refuse_changes()
+        init_node(self, node_name)
+        p = Params(self, SPECS, "bag_recorder")
         plans = plan_topics(_strings(p, "topics"), _strings(p, "latched_topics"))
-        depth = p.integer("qos_depth", 1, 1_000_000)
-        chunk_size = p.integer("chunk_size", 1024, 1 << 30)
-        flush_period = p.number("flush_period", 0.01, 3600.0)
-        compression = p.string("compression", tuple(COMPRESSION))
-        output = p.string("output")
-        for name in p.unknown_overrides():
-            self.get_logger().warning(f"ignoring unknown parameter '{name}'")
+        depth = p.value("qos_depth")
+        chunk_size = p.value("chunk_size")
+        flush_period = p.value("flush_period")
+        compression = p.value("compression")
+        output = p.value("output")
+        p.warn_unknown()
         resolved = []
         for plan in plans:
             try:

@@ -20,7 +20,9 @@ sample and numpy's percentile (diagnostics) are warmed up at start-up. Measured 
 torque_node latency p50/p99/max 0.367/0.863/31.6 -> 0.254/0.611/3.9 ms, callback p50/p99
 107/230 -> 89/213 us (of which publish() 51/112), CPU 20.8 -> 15.0 % of a core.
 
-Stamp rules (max_stamp_gap = G):
+Stamp rules (G = max_stamp_gap; with max_stamp_gap 0, the default, G adapts to the stream:
+max(0.1 s, 5 x the previous sample interval), so a 20 Hz (or 5 Hz) stream is not a gap at
+every sample while a 1 kHz stream that pauses 0.1 s is):
     stamp zero                      -> rejected (stamp_missing)
     stamp negative, nanosec >= 1e9  -> rejected (stamp_invalid)
     0 < stamp - last <= G           -> normal sample
@@ -40,6 +42,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
@@ -57,7 +60,7 @@ from .jointstate_cdr import (
     parse_layout,
     verify_layout,
 )
-from .params import Params, Spec
+from .params import Params, Spec, init_node
 
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
@@ -67,19 +70,31 @@ _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
 #: after a new publisher joins); a short queue then drops samples (depth 100: ~230, depth
 #: 10: 318 in make bench), 1000 none. Reliable, depth 1000 and the EventsExecutor were
 #: chosen by measurement: make bench, section choices; see config/torque_node.yaml.
-QOS_NOTE = "depth 1000 = 1 s at 1 kHz: rides out a ~0.3 s delivery stall without loss"
+
+#: The node's own config topic, relative to the node (two instances never collide).
+NODE_CONFIG_TOPIC = "~/config"
 
 #: Topics the stream nodes use themselves: input/output may not name them.
-RESERVED_TOPICS = {"/diagnostics": "diagnostics topic", CONFIG_TOPIC: "torque_node's config topic"}
+RESERVED_TOPICS = {"/diagnostics": "diagnostics topic", NODE_CONFIG_TOPIC: "node's config topic",
+                   CONFIG_TOPIC: "torque_node's config topic"}
+
+#: Adaptive max_stamp_gap (max_stamp_gap = 0): a gap resets the estimator when it exceeds
+#: both MIN_ADAPTIVE_GAP_S and GAP_PERIODS x the previous sample interval.
+MIN_ADAPTIVE_GAP_S = 0.1
+GAP_PERIODS = 5
 
 STREAM_SPECS = (
-    Spec("input_topic", "joint_states", "JointState input (remappable too)"),
-    Spec("output_topic", "joint_torques", "JointState output, model joint order"),
-    Spec("qos_depth", 1000, "history depth of input and output (>= 1); see QOS_NOTE"),
+    Spec("input_topic", "joint_states", "JointState input topic (remappable too)"),
+    Spec("output_topic", "joint_torques", "JointState output topic, model joint order"),
+    Spec("qos_depth", 1000, "history depth of input and output; 1000 = 1 s at 1 kHz, rides out "
+         "a ~0.3 s delivery stall without loss", "messages", 1, 100000),
     Spec("qos_reliable", True, "reliable (true) or best-effort (false) input and output"),
-    Spec("executor", "events", "'events' (EventsExecutor, fastest) or 'single'"),
-    Spec("diagnostics_period", 1.0, "s between /diagnostics messages; 0 = none"),
-    Spec("max_stamp_gap", 0.1, "s; larger stamp jumps reset the estimator history"),
+    Spec("executor", "events", "rclpy executor: events (EventsExecutor, fastest) or single",
+         choices=EXECUTORS),
+    Spec("diagnostics_period", 1.0, "time between /diagnostics messages; 0 = none", "s", 0.0, 3600.0),
+    Spec("max_stamp_gap", 0.0, "a stamp jump larger than this resets the estimator history; "
+         f"0 = adaptive: larger than {MIN_ADAPTIVE_GAP_S:g} s and {GAP_PERIODS} x the previous "
+         "sample interval", "s", 0.0, 3600.0),
 )
 
 
@@ -122,11 +137,11 @@ class StreamSettings:
         settings = cls(
             input_topic=p.topic("input_topic"),
             output_topic=p.topic("output_topic"),
-            qos_depth=p.integer("qos_depth", 1, 100000),
-            qos_reliable=p.boolean("qos_reliable"),
-            executor=p.string("executor", EXECUTORS),
-            diagnostics_period=p.number("diagnostics_period", 0.0, 3600.0),
-            max_stamp_gap=p.number("max_stamp_gap", 1e-6, 3600.0),
+            qos_depth=p.value("qos_depth"),
+            qos_reliable=p.value("qos_reliable"),
+            executor=p.value("executor"),
+            diagnostics_period=p.value("diagnostics_period"),
+            max_stamp_gap=p.value("max_stamp_gap"),
         )
         p.distinct_topics(("input_topic", "output_topic"), RESERVED_TOPICS)
         return settings
@@ -136,16 +151,16 @@ class JointStreamNode(Node):
     """Validates joint_states, gathers model-order q/qd, lets compute() fill effort."""
 
     specs: tuple[Spec, ...] = STREAM_SPECS
+    _announce = None  # set by a subclass when after_publish() must see the next output
+    config_name: str = ""  # config/<config_name>.yaml holds the defaults
 
     def __init__(self, node_name: str):
-        super().__init__(node_name)
-        self.params = Params(self, self.specs)
+        init_node(self, node_name)
+        self.params = Params(self, self.specs, self.config_name or node_name)
         self.settings = StreamSettings.from_params(self.params)
         self.executor_kind = self.settings.executor
         joint_names = self.configure(self.params)  # subclass: model etc.; may raise
-        self.params.refuse_changes()
-        for name in self.params.unknown_overrides():
-            self.get_logger().warning(f"ignoring unknown parameter '{name}'")
+        self.params.warn_unknown()
 
         self.joint_names = tuple(joint_names)
         self.names = v.NameMatcher(self.joint_names)
@@ -157,7 +172,10 @@ class JointStreamNode(Node):
         self._plan: InputPlan = GENERIC
         self._stamp = STAMP.unpack_from
         self._last_t_ns: int | None = None
-        self._max_gap_ns = round(self.settings.max_stamp_gap * 1e9)
+        self._adaptive_gap = self.settings.max_stamp_gap == 0.0
+        self._max_gap_ns = round((MIN_ADAPTIVE_GAP_S if self._adaptive_gap
+                                  else self.settings.max_stamp_gap) * 1e9)
+        self._last_dt_ns = 0  # previous sample interval (adaptive gap); 0 = none yet
         self._warned: dict[str, tuple[float, int]] = {}
 
         s = self.settings
@@ -178,13 +196,33 @@ class JointStreamNode(Node):
             f"{s.executor} executor)"
         )
 
+    def summary(self) -> str:
+        """One line for the log at shutdown: processed, rejected by reason, warm-up, resets."""
+        st = self.stats
+        rejected = {k: n for k, n in st.rejected.items() if n}
+        why = ", ".join(f"{k} {n}" for k, n in rejected.items())
+        resets = ", ".join(f"{k} {n}" for k, n in st.resets.items() if n)
+        return (f"summary: received {st.received}, processed {st.published} "
+                f"(warm-up {st.warmup}), rejected {sum(rejected.values())}"
+                + (f" ({why})" if why else "") + (f"; estimator resets: {resets}" if resets else ""))
+
+    def destroy_node(self) -> None:
+        if getattr(self, "stats", None) is not None:
+            # not the node's logger: after SIGINT its /rosout publisher is gone
+            rclpy.logging.get_logger(f"{self.get_name()}.shutdown").info(self.summary())
+        super().destroy_node()
+
     # -- subclass hooks ------------------------------------------------------------------
     def configure(self, params: Params) -> tuple[str, ...]:
         """Read the subclass's own parameters; return the output joint names."""
         raise NotImplementedError
 
-    def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool:
-        """Fill self.effort (and self.qd if not velocity_given); return warm.
+    def after_publish(self, sec: int, nanosec: int) -> None:
+        """Called after publishing an output while `_announce` is set."""
+
+    def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool | None:
+        """Fill self.effort (and self.qd if not velocity_given); return warm, or None when
+        the subclass publishes on its own schedule (nothing is published for this input).
 
         `reset` says the history must be dropped first (first sample or a stamp jump).
         """
@@ -226,6 +264,9 @@ class JointStreamNode(Node):
             stats.rejected[r.reason] += 1
             self._warn(r)
             return
+        if warm is None:  # the subclass publishes on its own schedule (a timer)
+            stats.record(_perf_ns() - t_start, recv_ns - t_ns, 0)
+            return
         out = self.out
         out.pack_stamp(sec, nsec)
         t_pub = _perf_ns()
@@ -235,6 +276,8 @@ class JointStreamNode(Node):
         if not warm:
             stats.warmup += 1
         stats.record(t_end - t_start, recv_ns - t_ns, t_end - t_pub)
+        if self._announce is not None:
+            self.after_publish(sec, nsec)
 
     def _check_finite(self, velocity_given: bool) -> None:
         """After a non-finite q.qd (or sum): reject NaN/inf in q or qd (else it was overflow)."""
@@ -340,26 +383,32 @@ class JointStreamNode(Node):
         reset = last is None
         if reset:
             v.check_jump(t_ns, None)
+            d = 0
         else:
             d = t_ns - last
-            if d > self._max_gap_ns:
-                v.check_jump(t_ns, last)
-                reset = True
-                self.stats.resets["stamp_gap"] += 1
-            elif d < -self._max_gap_ns:
-                v.check_jump(t_ns, last)
-                reset = True
-                self.stats.resets["stamp_jump_back"] += 1
-                self.get_logger().warning(
-                    f"header.stamp jumped back {-d / 1e9:.3f} s: source restarted? "
-                    "estimator history reset", throttle_duration_sec=WARN_EVERY_S
-                )
-            elif d <= 0:
-                raise v.Rejection(
-                    v.STAMP_NOT_INCREASING,
-                    f"stamp {t_ns} ns is {-d} ns at or before the previous sample",
-                )
+            if not 0 < d <= self._max_gap_ns:  # rare: a gap, a jump back or a repeat
+                gap = self._max_gap_ns
+                if self._adaptive_gap:  # a slow stream is not a gap (see STREAM_SPECS)
+                    gap = max(gap, GAP_PERIODS * self._last_dt_ns)
+                if d > gap:
+                    v.check_jump(t_ns, last)
+                    reset = True
+                    self.stats.resets["stamp_gap"] += 1
+                elif d < -gap:
+                    v.check_jump(t_ns, last)
+                    reset = True
+                    self.stats.resets["stamp_jump_back"] += 1
+                    self.get_logger().warning(
+                        f"header.stamp jumped back {-d / 1e9:.3f} s: source restarted? "
+                        "estimator history reset", throttle_duration_sec=WARN_EVERY_S
+                    )
+                elif d <= 0:
+                    raise v.Rejection(
+                        v.STAMP_NOT_INCREASING,
+                        f"stamp {t_ns} ns is {-d} ns at or before the previous sample",
+                    )
         self._last_t_ns = t_ns
+        self._last_dt_ns = 0 if reset else d
         return t_ns, reset
 
     def _warn(self, r: v.Rejection) -> None:

@@ -4,139 +4,375 @@ Input  sensor_msgs/JointState on `joint_states`: names in any order (extra names
        position required, velocity optional (empty -> estimated from positions).
 Output sensor_msgs/JointState on `joint_torques`: the model's 20 joints in joint_names
        order; position and velocity as used (velocity = the estimate when the input had
-       none); effort = RNEA torques (N·m); header (stamp, frame_id) copied from the input.
+       none); effort = RNEA torques (N·m). With output_rate_hz 0 (default): one output per
+       input, header (stamp, frame_id) copied from it. With output_rate_hz > 0: a timer
+       publishes at that rate, each output stamped with its publication time (system
+       clock) and computed from the estimator's prediction to that time; when no input came
+       for input_timeout s, or the input's stamps are that far behind this node's clock,
+       nothing is published (said in /diagnostics): never a stale repeat, never an
+       extrapolation beyond input_timeout.
 
-Accelerations come from consecutive header stamps (estimation/backward.py: backward difference,
-optional first-order low-pass). Lag: dt/2 (0.5 ms at 1 kHz) from given velocities, dt
-(1 ms) from positions only, plus 1/(2 pi fc) per enabled low-pass. Warm-up: the first
-sample after start or a reset is answered with qdd = 0 (and qd = 0 if estimated), counted
-as `warmup_total` in /diagnostics; the second (third without velocities) is a real estimate.
+Velocity and acceleration come from the state estimator (parameter `estimator`, settings
+`estimator.<name>`; forearm_dynamics/estimation). Bad samples are dropped and counted per
+reason (validation.py); stamp jumps beyond max_stamp_gap reset the estimator
+(stream_node.py).
 
-Bad samples are dropped and counted per reason (validation.py); stamp jumps beyond
-max_stamp_gap reset the estimator (stream_node.py). The model is stated once, latched,
-on `torque_node/config` (JSON) so a bag records which model ran. Parameters are read at
-start-up only (config/torque_node.yaml); an invalid one -> one error line, exit code 2.
+The model is stated on `~/config` (JSON, latched; /torque_node/config for a node named
+torque_node), at start-up, with every /diagnostics message and at once on every live change:
+model, body size, side, payload, the pro/sup placement that was built, the estimator (its
+lag per estimate and the noise it assumes), `config_id` and `applies_from_stamp_ns`.
+
+Live changes (torque_config.py): model, body_size, side, payload_*, placement, split,
+custom anthropometry and estimator parameters can be set at runtime. A change is
+validated on the executor thread (cheap; refused with the reason, nothing changes), built
+on this node's worker thread and swapped in by the subscription callback between two
+samples (one reference: `self._latest` is the newest built bundle, `self._bundle` the one
+in use). Several parameters set together (set_parameters_atomically) are one build and
+one swap. A change of model only keeps the estimator (and its history); a change of
+estimator settings starts a fresh one (it warms up again, counted as warm-up).
+Other parameters are read-only (their descriptors say so).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import sys
+import threading
+import time
 
 import numpy as np
 import pinocchio as pin
+import rclpy
+from diagnostic_msgs.msg import KeyValue
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from ..anthropometry import DIMENSIONS, resolve_body_size
-from ..builders import MODEL_KINDS
-from ..description import load_description
-from ..dynamics import ArmModel, build_model
-from ..estimation import make_estimator
 from . import validation as v
-from .common import CONFIG_TOPIC, latched_qos, main_for, package_version
-from .params import ParameterError, Params, Spec
-from .stream_node import STREAM_SPECS, JointStreamNode
-
-MODEL_SPECS = (
-    Spec("model", "segmented", "model kind: segmented, solid or anatomical"),
-    Spec("body_size", 50, "ANSUR II percentile 5, 50 or 95 (ignored with custom anthropometry)"),
-    *(Spec(d, 0.0, f"custom anthropometry: {d} (m or kg); 0 = unused") for d in DIMENSIONS),
-    Spec("split", -1.0, "segmented model split fraction in [0, 1]; -1 = config/model.yaml"),
-    Spec("estimator.accel_cutoff_hz", 0.0, "first-order low-pass on qdd (Hz); 0 = off"),
-    Spec("estimator.velocity_cutoff_hz", 0.0, "low-pass on qd estimated from positions; 0 = off"),
+from .common import latched_qos, main_for, package_version
+from .diagnostics import diagnostic_array
+from .params import ParameterError, Params
+from .stream_node import NODE_CONFIG_TOPIC, STREAM_SPECS, JointStreamNode
+from .torque_config import (
+    LIVE,
+    MODEL_SPECS,
+    OUTPUT_SPECS,
+    ModelBundle,
+    ModelRequest,
+    build_bundle,
 )
 
-
-def _model_from_params(p: Params) -> tuple[ArmModel, float | None]:
-    """Build the model the parameters ask for; ParameterError names the culprit."""
-    kind = p.string("model", MODEL_KINDS)
-    percentile = p.integer("body_size")
-    dims = {d: p.number(d, 0.0) for d in DIMENSIONS}
-    custom = {d: x for d, x in dims.items() if x > 0.0}
-    try:
-        size = resolve_body_size(custom or percentile)
-    except ValueError as exc:
-        culprit = next((d for d in DIMENSIONS if d in str(exc)), "body_mass") if custom else "body_size"
-        raise ParameterError(culprit, str(exc)) from None
-    split = p.number("split")
-    overrides = {} if split == -1.0 else {"split": split}
-    try:
-        return build_model(kind, size, **overrides), overrides.get("split")
-    except ValueError as exc:
-        raise ParameterError("split" if overrides else "model", str(exc)) from None
-
-
-def model_config(model: ArmModel, split: float | None) -> dict:
-    """What a bag needs to know about the model that produced the torques."""
-    size = model.body_size
-    simplified = None
-    if model.kind != "anatomical":
-        s = load_description().simplified
-        default_split = 0.0 if model.kind == "solid" else s.split
-        simplified = {
-            "split": default_split if split is None else split,
-            "axis_offset_proximal": s.axis_offset_proximal.tolist(),
-            "axis_offset_distal": s.axis_offset_distal.tolist(),
-        }
-    return {
-        "model": model.kind,
-        "body_size": {
-            "label": size.label,
-            "forearm": size.forearm,
-            "hand_length": size.hand_length,
-            "hand_breadth": size.hand_breadth,
-            "mass": size.mass,
-        },
-        "simplified": simplified,
-        "joint_names": list(model.joint_names),
-    }
+_time_ns = time.time_ns
+_PENDING = "__applies_from_stamp_ns__"  # placeholder in a prepared config text
 
 
 class TorqueNode(JointStreamNode):
     """Inverse dynamics per sample: pin.rnea on preallocated q, qd, qdd."""
 
-    specs = (*STREAM_SPECS, *MODEL_SPECS)
+    specs = (*STREAM_SPECS, *OUTPUT_SPECS, *MODEL_SPECS)
+    config_name = "torque_node"
 
     def __init__(self, node_name: str = "torque_node"):
         super().__init__(node_name)
-        self.config_pub = self.create_publisher(String, CONFIG_TOPIC, latched_qos())
-        info = {
-            "node": self.get_fully_qualified_name(),
-            "version": package_version(),
-            **model_config(self.arm, self._split),
-            "estimator": self.estimator.describe(1e-3),
-            "input_topic": self.sub.topic_name,
-            "output_topic": self.pub.topic_name,
-            "max_stamp_gap": self.settings.max_stamp_gap,
-        }
-        self.config_pub.publish(String(data=json.dumps(info)))
+        self.config_pub = self.create_publisher(String, NODE_CONFIG_TOPIC, latched_qos())
+        self._config_json = ""
+        self._config_text: dict[int, str] = {}
+        self._version = package_version()
+        self._announce: ModelBundle | None = None  # installed, not yet stated with its stamp
+        self._publish_config(self._bundle, 0)
+        self._worker = _Builder(self)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._after_set)
+        if self.output_rate_hz > 0:
+            self.create_timer(1.0 / self.output_rate_hz, self._on_timer)
+        b = self._bundle
         self.get_logger().info(
-            f"model {self.arm.kind}, body size {self.arm.body_size.label}; "
-            f"config on {self.config_pub.topic_name}"
+            f"model {b.arm.kind}, body size {b.arm.body_size.label}, estimator "
+            f"{b.request.estimator}; config on {self.config_pub.topic_name}"
+            + (f"; output at {self.output_rate_hz:g} Hz" if self.output_rate_hz > 0 else "")
         )
 
+    # -- start-up ------------------------------------------------------------------------
     def configure(self, params: Params) -> tuple[str, ...]:
-        self.arm, self._split = _model_from_params(params)
-        self.estimator = make_estimator("backward", self.arm.nv, {
-            "accel_cutoff_hz": params.number("estimator.accel_cutoff_hz", 0.0, 1e6),
-            "velocity_cutoff_hz": params.number("estimator.velocity_cutoff_hz", 0.0, 1e6),
-        })
-        self._pin_model, self._pin_data = self.arm.model, self.arm.data
-        return self.arm.joint_names
+        self.output_rate_hz = params.value("output_rate_hz")
+        self.input_timeout_ns = round(params.value("input_timeout") * 1e9)
+        request = ModelRequest.from_values(params.values(LIVE))
+        try:
+            bundle = build_bundle(request, 1, 20)
+        except ValueError as exc:
+            raise ParameterError("model", str(exc)) from None
+        if bundle.arm.nv != bundle.estimator.n:
+            bundle = build_bundle(request, 1, bundle.arm.nv)
+        self._bundle = self._latest = bundle
+        self._next_id = 2
+        self.live_changes = {"applied": 0, "refused": 0, "failed": 0}
+        # output_rate_hz > 0: the estimate at the last update, and the input clock
+        n = bundle.arm.nv
+        self._anchor = (np.zeros(n), np.zeros(n), np.zeros(n))
+        self._have_state = False
+        self._last_in_ns = 0  # receive time of the last input (system clock)
+        self._last_out_ns = 0
+        self._state_t_ns = 0
+        self._silent: str | None = None  # why the timer is not publishing
+        self._velocity_given = True
+        self.timer_skipped = {"no_input": 0, "input_timeout": 0, "stamps_behind": 0}
+        return bundle.arm.joint_names
 
-    def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool:
-        est = self.estimator
+    # -- the hot path --------------------------------------------------------------------
+    def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool | None:
+        b = self._latest
+        if b is not self._bundle:  # a live change was built: swap between two samples
+            reset = self._install(b) or reset
+            b = self._bundle
+        est = b.estimator
         if reset:
             est.reset()
         warm = est.update(t_ns, self.q, self.qd if velocity_given else None)
+        self._velocity_given = velocity_given
+        if self.output_rate_hz > 0:  # the timer publishes; keep the estimate at t_ns
+            a_q, a_qd, a_qdd = self._anchor
+            np.copyto(a_q, est.q)
+            np.copyto(a_qd, est.qd)
+            np.copyto(a_qdd, est.qdd)
+            self._have_state = True
+            self._state_t_ns = t_ns
+            self._last_in_ns = _time_ns()
+            return None
         if not velocity_given:
             np.copyto(self.qd, est.qd)
-        tau = pin.rnea(self._pin_model, self._pin_data, self.q, self.qd, est.qdd)
+        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh
             raise v.Rejection(v.NON_FINITE_TORQUE, "torque overflowed (absurd inputs?)")
         np.copyto(self.effort, tau)
         return warm
+
+    def after_publish(self, sec: int, nanosec: int) -> None:
+        """Called after an output is published while a new config awaits its first stamp."""
+        b = self._announce
+        if b is not None and b is self._bundle:
+            self._announce = None  # the worker thread publishes it: no JSON work here
+            self._worker.announce(b, sec * 1_000_000_000 + nanosec)
+
+    def _install(self, b: ModelBundle) -> bool:
+        """Make `b` the bundle in use; True if its estimator is new (history reset)."""
+        fresh = b.estimator is not self._bundle.estimator
+        self._bundle = b
+        self._announce = b
+        self.live_changes["applied"] += 1
+        if fresh:
+            self._have_state = False
+        return fresh
+
+    # -- fixed-rate output ---------------------------------------------------------------
+    def _on_timer(self) -> None:
+        now = _time_ns()
+        if not self._have_state:
+            self._skip("no_input", "no input yet")
+            return
+        if now - self._last_in_ns > self.input_timeout_ns:
+            self._skip("input_timeout", f"no input for {(now - self._last_in_ns) / 1e9:.3f} s "
+                       f"(> input_timeout): not publishing")
+            return
+        if now - self._state_t_ns > self.input_timeout_ns:
+            self._skip("stamps_behind", f"input stamps {(now - self._state_t_ns) / 1e9:.3f} s behind "
+                       "this node's clock (> input_timeout): not publishing")
+            return
+        t_start = time.perf_counter_ns()
+        stamp = max(now, self._last_out_ns + 1)
+        b = self._bundle
+        est = b.estimator
+        a_q, a_qd, a_qdd = self._anchor
+        np.copyto(est.q, a_q)
+        np.copyto(est.qd, a_qd)
+        np.copyto(est.qdd, a_qdd)
+        est.predict(stamp)
+        np.copyto(self.q, est.q)
+        np.copyto(self.qd, est.qd)
+        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+        if not math.isfinite(tau.sum()):
+            self.stats.rejected[v.NON_FINITE_TORQUE] += 1
+            return
+        np.copyto(self.effort, tau)
+        sec, nsec = divmod(stamp, 1_000_000_000)
+        self.out.pack_stamp(sec, nsec)
+        self.pub.publish(self.out.payload())
+        self._last_out_ns = stamp
+        self.stats.published += 1
+        if self._silent is not None:
+            self.get_logger().info("input back: publishing again")
+            self._silent = None
+        if self._announce is not None:
+            self.after_publish(sec, nsec)
+        t_end = time.perf_counter_ns()
+        self.stats.record(t_end - t_start, now - self._state_t_ns, 0)
+
+    def _skip(self, key: str, why: str) -> None:
+        self.timer_skipped[key] += 1
+        if self._silent != key:
+            if key != "no_input":
+                self.get_logger().warning(why)
+            self._silent = key
+
+    # -- live changes --------------------------------------------------------------------
+    def _on_set(self, params: list[Parameter]) -> SetParametersResult:
+        """Validate a change of live parameters (cheap, no build); refuse with the reason."""
+        names = {p.name for p in params}
+        if not names & LIVE:
+            return SetParametersResult(successful=True)
+        values = self.params.values(LIVE)
+        values.update({p.name: p.value for p in params if p.name in LIVE})
+        try:
+            for p in params:
+                why = self.params.specs[p.name].check(p.value) if p.name in self.params.specs else None
+                if why:
+                    raise ParameterError(p.name, why)
+            self._requested = ModelRequest.from_values(values)
+        except ParameterError as exc:
+            self.live_changes["refused"] += 1
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _after_set(self, params: list[Parameter]) -> None:
+        if {p.name for p in params} & LIVE:
+            self._worker.submit(self._requested)
+
+    def build(self, request: ModelRequest) -> None:
+        """Worker thread: build, then publish the bundle with one reference assignment."""
+        try:
+            b = build_bundle(request, self._next_id, self._latest.arm.nv, self._latest)
+            if b.arm.joint_names != self.joint_names:
+                raise ValueError("its joint names differ from the running model's")
+        except (ValueError, TypeError) as exc:
+            self.live_changes["failed"] += 1
+            self.get_logger().error(f"live change not applied, config {self._bundle.config_id} "
+                                    f"keeps running: {exc}")
+            return
+        self._next_id += 1
+        self._publish_config(b, None)  # built: stated at once; applied from its first sample
+        self._latest = b
+        self.get_logger().info(f"config {b.config_id} built in {b.build_ms:.1f} ms "
+                               f"({b.arm.kind}, body size {b.arm.body_size.label}); "
+                               "applies from the next sample")
+
+    # -- config message and diagnostics --------------------------------------------------
+    def config_message(self, b: ModelBundle, applies_from: int | None) -> dict:
+        dt = (self._last_dt_ns or 1_000_000) * 1e-9
+        s = self.settings
+        return {
+            "config_id": b.config_id,
+            "applies_from_stamp_ns": applies_from,
+            "node": self.get_fully_qualified_name(),
+            "version": self._version,
+            **b.model_config,
+            "estimator": b.estimator.describe(dt, self._velocity_given),
+            "input_topic": self.sub.topic_name if hasattr(self, "sub") else s.input_topic,
+            "output_topic": self.pub.topic_name if hasattr(self, "pub") else s.output_topic,
+            "max_stamp_gap": s.max_stamp_gap,
+            "output_rate_hz": self.output_rate_hz,
+            "input_timeout": self.input_timeout_ns / 1e9,
+            "build_ms": round(b.build_ms, 3),
+        }
+
+    def _publish_config(self, b: ModelBundle, applies_from: int | None) -> None:
+        """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None).
+
+        The text is prepared once per bundle (worker thread); applying it on the executor
+        thread is one string replacement and a publish.
+        """
+        if applies_from is None or b.config_id not in self._config_text:
+            self._config_text = {b.config_id: json.dumps(self.config_message(b, _PENDING))}
+        template = self._config_text[b.config_id]
+        text = template.replace(f'"{_PENDING}"', "null" if applies_from is None else str(applies_from))
+        if applies_from is not None:
+            self._config_json = text  # the one in force: republished with the diagnostics
+        self.config_pub.publish(String(data=text))
+
+    def _publish_diagnostics(self) -> None:
+        v.flush_suppressed(self._warned, self.get_logger(), 5.0)
+        status = self.stats.status(f"{self.get_name()}: pipeline", self.get_fully_qualified_name())
+        b = self._bundle
+        desc = b.estimator.describe((self._last_dt_ns or 1_000_000) * 1e-9, self._velocity_given)
+        extra = {
+            "config_id": str(b.config_id),
+            "model": f"{b.arm.kind}, body size {b.arm.body_size.label}",
+            "estimator": desc["method"],
+            **{f"estimator.lag_{k}_s": f"{x:.6f}" for k, x in desc["lag_s"].items()},
+            "estimator.noise_rad": "unknown" if desc["noise_rad"] is None else f"{desc['noise_rad']:.3g}",
+            **{f"live_changes.{k}": str(n) for k, n in self.live_changes.items()},
+        }
+        if self.output_rate_hz > 0:
+            extra.update({f"timer_skipped.{k}": str(n) for k, n in self.timer_skipped.items()})
+            if self._silent in ("input_timeout", "stamps_behind"):
+                status.level = status.WARN
+                status.message = f"not publishing: {self._silent.replace('_', ' ')}"
+        status.values.extend(KeyValue(key=k, value=x) for k, x in extra.items())
+        self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
+        if self._config_json:
+            self.config_pub.publish(String(data=self._config_json))
+
+    def destroy_node(self) -> None:
+        worker = getattr(self, "_worker", None)
+        if worker is not None:
+            worker.stop()
+        if getattr(self, "stats", None) is not None and self.output_rate_hz > 0:
+            skipped = ", ".join(f"{k} {n}" for k, n in self.timer_skipped.items() if n)
+            rclpy.logging.get_logger(f"{self.get_name()}.shutdown").info(
+                f"timer outputs skipped: {skipped or 'none'}")
+        super().destroy_node()
+
+
+class _Builder:
+    """One worker thread that builds requested bundles; the newest request wins."""
+
+    def __init__(self, node: TorqueNode):
+        self._node = node
+        self._cv = threading.Condition()
+        self._request: ModelRequest | None = None
+        self._announcements: list[tuple[ModelBundle, int]] = []
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name="model_builder", daemon=True)
+        self._thread.start()
+
+    def submit(self, request: ModelRequest) -> None:
+        with self._cv:
+            self._request = request
+            self._cv.notify()
+
+    def announce(self, bundle: ModelBundle, stamp_ns: int) -> None:
+        """Publish `bundle`'s config as applied from `stamp_ns` (off the executor thread)."""
+        with self._cv:
+            self._announcements.append((bundle, stamp_ns))
+            self._cv.notify()
+
+    def stop(self) -> None:
+        with self._cv:
+            self._stop = True
+            self._cv.notify()
+        self._thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        while True:
+            with self._cv:
+                while self._request is None and not self._announcements and not self._stop:
+                    self._cv.wait()
+                if self._stop:
+                    return
+                announcements, self._announcements = self._announcements, []
+                request, self._request = self._request, None
+            for bundle, stamp_ns in announcements:
+                self._node._publish_config(bundle, stamp_ns)
+            if request is None:
+                continue
+            # While this thread holds the GIL the executor thread waits: hand it back often
+            # (CPython's default switch interval is 5 ms, longer than a 1 kHz period).
+            interval = sys.getswitchinterval()
+            sys.setswitchinterval(1e-5)
+            try:
+                self._node.build(request)
+            finally:
+                sys.setswitchinterval(interval)
 
 
 def main() -> None:

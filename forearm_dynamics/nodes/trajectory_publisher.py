@@ -37,27 +37,33 @@ from ..description import JOINT_NAMES
 from ..movements import Movement, get_movement, movement_library
 from .common import EXECUTORS, latched_qos, main_for, stream_qos
 from .jointstate_cdr import OutputTemplate
-from .params import ParameterError, Params, Spec
+from .params import ParameterError, Params, Spec, init_node
 
 #: Samples one late tick may catch up (0.5 s at 1 kHz, within the default depth of 1000);
 #: beyond that they are skipped with a warning. A ~0.3 s stall of the process was seen.
 MAX_BURST = 500
 
 SPECS = (
-    Spec("movements", list(range(1, 66)), "movement ids (1-65) in replay order; default all"),
-    Spec("body_size", 50, "percentile 5, 50 or 95 (recorded in the markers; angles are the same)"),
-    Spec("rate_hz", 1000.0, "samples per second"),
-    Spec("loop", False, "replay the list forever"),
-    Spec("start_delay", 5.0, "s to wait before the first sample (discovery settles; see YAML)"),
-    Spec("subscriber_timeout", 10.0, "s to wait for joint_states subscribers; then start anyway"),
-    Spec("min_subscribers", 1, "subscribers to wait for (2 with torque_node + bag_recorder)"),
-    Spec("gap", 0.0, "s of silence between movements"),
-    Spec("drain", 2.0, "s to wait at the end for subscribers to acknowledge everything"),
-    Spec("output_topic", "joint_states", "JointState output"),
-    Spec("marker_topic", "movement", "JSON marker at each movement start"),
-    Spec("qos_depth", 1000, "history depth of the JointState stream (1 s at 1 kHz)"),
+    Spec("movements", list(range(1, 66)), "movement ids in replay order; default all 65", "", 1,
+         len(movement_library())),
+    Spec("body_size", 50, "ANSUR II percentile 5, 50 or 95, recorded in the markers (the "
+         "angles do not depend on it)"),
+    Spec("rate_hz", 1000.0, "samples per second", "Hz", 1e-3, 10000.0),
+    Spec("loop", False, "replay the list forever (false: drain, then exit 0)"),
+    Spec("start_delay", 5.0, "wait before the first sample (discovery settles; see the YAML)",
+         "s", 0.0, 3600.0),
+    Spec("subscriber_timeout", 10.0, "wait this long for joint_states subscribers, then start "
+         "anyway", "s", 0.0, 3600.0),
+    Spec("min_subscribers", 1, "subscribers to wait for (2 with torque_node + bag_recorder)",
+         "", 0, 1000),
+    Spec("gap", 0.0, "silence between movements", "s", 0.0, 3600.0),
+    Spec("drain", 2.0, "wait at the end for subscribers to acknowledge everything", "s", 0.0, 600.0),
+    Spec("output_topic", "joint_states", "JointState output topic"),
+    Spec("marker_topic", "movement", "topic of the JSON marker sent at each movement start"),
+    Spec("qos_depth", 1000, "history depth of the JointState stream (1000 = 1 s at 1 kHz)",
+         "messages", 1, 100000),
     Spec("qos_reliable", True, "reliable (true) or best-effort (false) stream"),
-    Spec("executor", "events", "'events' or 'single'"),
+    Spec("executor", "events", "rclpy executor: events or single", choices=EXECUTORS),
 )
 
 
@@ -82,8 +88,8 @@ class ReplaySettings:
 
     @classmethod
     def from_params(cls, p: Params) -> ReplaySettings:
-        ids = p.integers("movements", 1, len(movement_library()))
-        body_size = p.integer("body_size")
+        ids = p.value("movements")
+        body_size = p.value("body_size")
         try:
             resolve_body_size(body_size)
         except ValueError as exc:
@@ -91,18 +97,18 @@ class ReplaySettings:
         settings = cls(
             movements=tuple(get_movement(i) for i in ids),
             body_size=body_size,
-            rate_hz=p.number("rate_hz", 1e-3, 10000.0),
-            loop=p.boolean("loop"),
-            start_delay=p.number("start_delay", 0.0, 3600.0),
-            subscriber_timeout=p.number("subscriber_timeout", 0.0, 3600.0),
-            min_subscribers=p.integer("min_subscribers", 0, 1000),
-            gap=p.number("gap", 0.0, 3600.0),
-            drain=p.number("drain", 0.0, 600.0),
+            rate_hz=p.value("rate_hz"),
+            loop=p.value("loop"),
+            start_delay=p.value("start_delay"),
+            subscriber_timeout=p.value("subscriber_timeout"),
+            min_subscribers=p.value("min_subscribers"),
+            gap=p.value("gap"),
+            drain=p.value("drain"),
             output_topic=p.topic("output_topic"),
             marker_topic=p.topic("marker_topic"),
-            qos_depth=p.integer("qos_depth", 1, 100000),
-            qos_reliable=p.boolean("qos_reliable"),
-            executor=p.string("executor", EXECUTORS),
+            qos_depth=p.value("qos_depth"),
+            qos_reliable=p.value("qos_reliable"),
+            executor=p.value("executor"),
         )
         p.distinct_topics(("output_topic", "marker_topic"))  # two types on one topic: rcl error
         return settings
@@ -117,12 +123,10 @@ class TrajectoryPublisher(Node):
     """Timer-driven replay: waiting -> (movement, gap)* -> drain -> done."""
 
     def __init__(self, node_name: str = "trajectory_publisher"):
-        super().__init__(node_name)
-        self.params = Params(self, SPECS)
+        init_node(self, node_name)
+        self.params = Params(self, SPECS, "trajectory_publisher")
         s = self.settings = ReplaySettings.from_params(self.params)
-        self.params.refuse_changes()
-        for name in self.params.unknown_overrides():
-            self.get_logger().warning(f"ignoring unknown parameter '{name}'")
+        self.params.warn_unknown()
         self.executor_kind = s.executor
         self.done = Future()
         self.exit_code = 0

@@ -1,0 +1,272 @@
+"""torque_node's model parameters: validation, the immutable bundle a sample is computed
+with, and the config message that states it.
+
+A live change (`ros2 param set`, several at once with set_parameters_atomically) goes:
+validate here (`ModelRequest.from_values`, cheap: no model is built, on the executor
+thread) -> accepted or refused with the reason -> built on the node's worker thread
+(`build_bundle`, ~1 ms) -> swapped in by the subscription callback between two samples (one
+reference) -> config message republished with its `config_id` and the stamp of the first
+sample computed with it (`applies_from_stamp_ns`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import pinocchio as pin
+import yaml
+
+from ..anthropometry import DIMENSIONS, resolve_body_size
+from ..bag.model_config import CONFIG_SCHEMA
+from ..builders import MODEL_KINDS
+from ..description import load_description
+from ..dynamics import ArmModel, build_model
+from ..estimation import (
+    DEFAULT_ESTIMATOR,
+    ESTIMATORS,
+    StateEstimator,
+    all_settings,
+    make_estimator,
+)
+from ..paths import config_file
+from .params import ParameterError, Spec
+
+SIDES = ("right", "left")
+PLACEMENTS = ("", "paper", "parallel", "oblique")
+_DIM_UNITS = {"body_mass": "kg"}
+
+
+def _dimension_bounds() -> dict[str, tuple[float, float]]:
+    return {k: tuple(v) for k, v in yaml.safe_load(config_file("body_sizes.yaml").read_text())["bounds"].items()}
+
+
+def _model_specs() -> tuple[Spec, ...]:
+    bounds = _dimension_bounds()
+    est = tuple(
+        Spec(f"estimator.{s.name}", float(s.default), s.description, s.unit, s.lo, s.hi, live=True)
+        for s in all_settings().values()
+    )
+    return (
+        Spec("model", "segmented", "model kind", choices=MODEL_KINDS, live=True),
+        Spec("body_size", 50, "body size: an ANSUR II percentile given as an integer (5, 50, 95: men) "
+             "or a string ('50', 'male_95', 'female_5' where the model knows women's sizes); "
+             "ignored when custom anthropometry is set. The one parameter that takes two types",
+             live=True, dynamic=True),
+        Spec("side", "right", "which arm (the left is the mirror image; same joint names and signs)",
+             choices=SIDES, live=True),
+        Spec("payload_mass", 0.0, "mass of an object held in the hand; 0 = empty hand", "kg",
+             0.0, 50.0, live=True),
+        Spec("payload_com", [0.0, 0.0, 0.0], "the object's centre of mass (x, y, z) in the hand "
+             "frame", "m", -0.5, 0.5, live=True),
+        Spec("payload_inertia", [0.0] * 6, "the object's inertia about its centre of mass "
+             "(Ixx, Iyy, Izz, Ixy, Ixz, Iyz); all zeros = a point mass", "kg*m^2", -10.0, 10.0,
+             live=True),
+        Spec("placement", "", "pro/sup axis placement of the simplified models; '' = the model's "
+             "default", choices=PLACEMENTS, live=True),
+        *(Spec(d, 0.0, f"custom anthropometry: {d.replace('_', ' ')}; 0 = unused (any non-zero "
+               "value replaces body_size; body_mass and stature, or all three segment lengths, "
+               "are then needed)", _DIM_UNITS.get(d, "m"), 0.0, bounds[d][1], live=True)
+          for d in DIMENSIONS),
+        Spec("split", -1.0, "segmented model: fraction of the forearm proximal to the pro/sup split, "
+             "in [0, 1]; -1 = config/model.yaml", "", -1.0, 1.0, live=True),
+        Spec("estimator", DEFAULT_ESTIMATOR, "state estimator for velocity and acceleration",
+             choices=tuple(ESTIMATORS), live=True),
+        *est,
+    )
+
+
+MODEL_SPECS = _model_specs()
+LIVE = frozenset(s.name for s in MODEL_SPECS)
+
+OUTPUT_SPECS = (
+    Spec("output_rate_hz", 0.0, "0 = one output per input; > 0 = publish from a timer at this "
+         "rate, each message stamped with its publication time (system clock) and computed from "
+         "the estimator's prediction to that time", "Hz", 0.0, 10000.0),
+    Spec("input_timeout", 0.2, "with output_rate_hz > 0: stop publishing when no input arrived "
+         "for this long (never extrapolate further)", "s", 0.001, 3600.0),
+)
+
+
+def _accepts(keyword: str) -> bool:
+    """Whether this build of the core's build_model takes `keyword` (side, payload, placement)."""
+    return keyword in inspect.signature(build_model).parameters
+
+
+@dataclass(frozen=True)
+class ModelRequest:
+    """Validated model and estimator parameters (what to build)."""
+
+    kind: str
+    body_size: Any  # int, str or dict of custom anthropometry
+    side: str
+    payload_mass: float
+    payload_com: tuple[float, ...]
+    payload_inertia: tuple[float, ...] | None
+    placement: str
+    split: float | None
+    estimator: str
+    estimator_settings: tuple[tuple[str, float], ...]
+
+    @classmethod
+    def from_values(cls, v: dict[str, Any]) -> ModelRequest:
+        """Check the values rclpy cannot (body size, combinations); ParameterError names one."""
+        kind = v["model"]
+        custom = {d: float(v[d]) for d in DIMENSIONS if v[d] > 0.0}
+        size = custom or _body_size_value(v["body_size"])
+        try:
+            resolve_body_size(size)
+        except ValueError as exc:
+            raise _body_size_error(str(exc), bool(custom), v["body_size"]) from None
+        split = float(v["split"])
+        if split != -1.0 and not 0.0 <= split <= 1.0:
+            raise ParameterError("split", f"{split!r}: must be in [0, 1], or -1 for the default")
+        if split != -1.0 and kind != "segmented":
+            raise ParameterError("split", f"applies to the segmented model only (model is {kind})")
+        placement = v["placement"]
+        if placement and kind == "anatomical":
+            raise ParameterError("placement", "applies to the solid and segmented models only")
+        inertia = tuple(float(x) for x in v["payload_inertia"])
+        if len(inertia) not in (0, 6):
+            raise ParameterError("payload_inertia", f"needs 6 values (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) "
+                                 f"or none, got {len(inertia)}")
+        com = tuple(float(x) for x in v["payload_com"])
+        if len(com) != 3:
+            raise ParameterError("payload_com", f"needs 3 values (x, y, z) in m, got {len(com)}")
+        req = cls(kind, size, v["side"], float(v["payload_mass"]), com,
+                  inertia if any(inertia) else None, placement, None if split == -1.0 else split,
+                  v["estimator"], tuple((k.removeprefix("estimator."), float(x))
+                                        for k, x in sorted(v.items()) if k.startswith("estimator.")))
+        for name, keyword, default in (("side", "side", "right"), ("payload_mass", "payload_mass", 0.0),
+                                       ("placement", "placement", "")):
+            value = getattr(req, keyword)
+            if value != default and not _accepts(keyword):
+                raise ParameterError(name, f"{value!r} needs a model core with '{keyword}' "
+                                     "support; this build has none")
+        try:
+            make_estimator(req.estimator, 1, req.settings_for(req.estimator))
+        except ValueError as exc:
+            raise ParameterError("estimator", str(exc)) from None
+        return req
+
+    def settings_for(self, method: str) -> dict[str, float]:
+        names = {s.name for s in ESTIMATORS[method].settings}
+        return {k: x for k, x in self.estimator_settings if k in names}
+
+    def build_kwargs(self) -> dict[str, Any]:
+        """Keywords for build_model: only those that differ from their defaults."""
+        kw: dict[str, Any] = {}
+        if self.side != "right":
+            kw["side"] = self.side
+        if self.payload_mass != 0.0:
+            kw["payload_mass"] = self.payload_mass
+            kw["payload_com"] = self.payload_com
+            if self.payload_inertia is not None:
+                kw["payload_inertia"] = self.payload_inertia
+        if self.placement:
+            kw["placement"] = self.placement
+        if self.split is not None:
+            kw["split"] = self.split
+        return kw
+
+    def same_estimator(self, other: ModelRequest) -> bool:
+        return (self.estimator, self.settings_for(self.estimator)) == \
+            (other.estimator, other.settings_for(other.estimator))
+
+
+def _body_size_value(value: Any) -> Any:
+    if isinstance(value, str) and value.strip().isdigit():
+        return int(value.strip())
+    return value
+
+
+def _body_size_error(msg: str, custom: bool, value: Any) -> ParameterError:
+    """resolve_body_size's message, in ROS parameters (no 'dict')."""
+    if custom:
+        if "needs body_mass" in msg:
+            return ParameterError("body_mass", "custom anthropometry needs body_mass (kg) too")
+        if "needs stature" in msg:
+            return ParameterError("stature", "custom anthropometry needs stature (m), or all of "
+                                  "forearm_length, hand_length and hand_breadth")
+        culprit = next((d for d in DIMENSIONS if msg.startswith(d)), "body_mass")
+        return ParameterError(culprit, msg)
+    return ParameterError("body_size", f"{value!r} is not a body size: give 5, 50 or 95 (ANSUR II "
+                          "men's percentiles) or a string such as 'male_50' / 'female_50' where "
+                          "the model knows it, or set custom anthropometry (body_mass, stature)")
+
+
+@dataclass(frozen=True)
+class ModelBundle:
+    """Everything one sample is computed with; never modified once built (swapped whole)."""
+
+    config_id: int
+    request: ModelRequest
+    arm: ArmModel
+    model: pin.Model
+    data: pin.Data
+    estimator: StateEstimator
+    model_config: dict  # the model part of the config message
+    build_ms: float
+
+
+def build_bundle(request: ModelRequest, config_id: int, n: int,
+                 previous: ModelBundle | None = None) -> ModelBundle:
+    """Build the model (and the estimator, unless its settings are unchanged: then the
+    running one carries on with its history). ValueError if the core refuses."""
+    t0 = time.perf_counter()
+    arm = build_model(request.kind, request.body_size, **request.build_kwargs())
+    if previous is not None and request.same_estimator(previous.request):
+        est = previous.estimator
+    else:
+        est = make_estimator(request.estimator, n, request.settings_for(request.estimator))
+    ms = (time.perf_counter() - t0) * 1e3
+    return ModelBundle(config_id, request, arm, arm.model, arm.data, est,
+                       model_config(arm, request.split, request), ms)
+
+
+def _placement(arm: ArmModel, split: float | None, request: ModelRequest | None) -> dict | None:
+    """The pro/sup placement that was built (None for the anatomical model)."""
+    if arm.kind == "anatomical":
+        return None
+    built = getattr(arm, "placement", None)  # a core that records what it built
+    if isinstance(built, dict):
+        return {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in built.items()}
+    name = request.placement if request is not None else ""
+    if name:  # a named variant of the core: its name rebuilds it
+        out: dict = {"name": name}
+        if split is not None:
+            out["split"] = split
+        return out
+    # builders.build_tree's defaults: the solid model turns about the cylinder's own axis
+    # (split 0, no offsets); the segmented model uses config/model.yaml's values.
+    s = load_description().simplified
+    if arm.kind == "solid":
+        return {"split": 0.0, "axis_offset_proximal": [0.0, 0.0], "axis_offset_distal": [0.0, 0.0]}
+    return {"split": s.split if split is None else split,
+            "axis_offset_proximal": s.axis_offset_proximal.tolist(),
+            "axis_offset_distal": s.axis_offset_distal.tolist()}
+
+
+def model_config(arm: ArmModel, split: float | None = None, request: ModelRequest | None = None) -> dict:
+    """The model part of the config message: exactly what was built (bag/model_config.py
+    reads it back, strictly)."""
+    payload = None
+    if request is not None and request.payload_mass > 0.0:
+        payload = {"mass": request.payload_mass, "com": list(request.payload_com),
+                   "inertia": list(request.payload_inertia) if request.payload_inertia else None}
+    out = {
+        "schema": CONFIG_SCHEMA,
+        "model": arm.kind,
+        "body_size": dataclasses.asdict(arm.body_size),
+        "side": request.side if request is not None else "right",
+        "payload": payload,
+        "placement": _placement(arm, split, request),
+        "joint_names": list(arm.joint_names),
+    }
+    if any(isinstance(x, float) and not math.isfinite(x) for x in out["body_size"].values()):
+        raise ValueError("body size scale factors are not finite")
+    return out
