@@ -37,18 +37,46 @@ def test_solid_config_states_the_solid_axis() -> None:
     """The solid model turns about the cylinder's own axis: its config says so (it used to
     carry the segmented model's offsets, which a reader then had to drop)."""
     cfg = model_config(build_model("solid", 50))
-    assert cfg["placement"] == {"split": 0.0, "axis_offset_proximal": [0.0, 0.0],
-                                "axis_offset_distal": [0.0, 0.0]}
+    assert cfg["placement"] == {"name": "solid", "split": 0.0, "split_rule": "fixed",
+                                "axis_offset_proximal": [0.0, 0.0],
+                                "axis_offset_distal": [0.0, 0.0], "cylinder": "uniform"}
     seg = model_config(build_model("segmented", 50, split=0.3))
-    # a split given explicitly is stated (the segmented default otherwise)
-    assert model_config(build_model("segmented", 50, split=0.3), 0.3)["placement"]["split"] == 0.3
+    # a split given explicitly is stated, as a custom placement
+    assert seg["placement"]["split"] == 0.3 and seg["placement"]["name"] == "custom"
     assert seg["placement"]["axis_offset_distal"] != [0.0, 0.0]
+    paper = model_config(build_model("segmented", 95, placement="paper"))["placement"]
+    assert paper["name"] == "paper" and paper["split_rule"] == "radius_inertia"
     assert model_config(build_model("anatomical", 50))["placement"] is None
+
+
+@pytest.mark.parametrize("kw", [
+    {"placement": "paper"}, {"placement": "parallel"}, {"cylinder": "mass_matched"},
+    {"side": "left"}, {"side": "left", "payload_mass": 0.4},
+    {"payload_mass": 1.2, "payload_com": (0.01, -0.07, -0.04), "payload_inertia": (2e-3, 1e-3, 2e-3, 0, 0, 0)},
+    {"split": 0.4, "axis_offset_distal": (-0.01, 0.002)},
+])
+@pytest.mark.parametrize("size", [5, "female_95"])
+def test_personal_and_placed_models_round_trip(kw: dict, size) -> None:
+    """Side, payload and every placement are stated and rebuilt exactly, at any body size
+    (offsets are published at that size: the reader must not scale them twice)."""
+    arm = build_model("segmented", size, **kw)
+    cfg = json.loads(json.dumps(model_config(arm)))
+    back = model_from_config(cfg).arm
+    np.testing.assert_allclose(back.inverse_dynamics(Q, QD, QDD), arm.inverse_dynamics(Q, QD, QDD),
+                               rtol=0, atol=1e-12)
+    assert back.side == arm.side
+
+
+def test_a_placement_this_core_would_build_differently_is_refused() -> None:
+    cfg = model_config(build_model("segmented", 50, placement="parallel"))
+    cfg["placement"]["axis_offset_distal"][0] += 1e-4
+    with pytest.raises(ValueError, match="placement differs"):
+        model_from_config(cfg)
 
 
 def test_a_split_survives_the_round_trip() -> None:
     arm = build_model("segmented", 50, split=0.3)
-    back = model_from_config(json.loads(json.dumps(model_config(arm, 0.3)))).arm
+    back = model_from_config(json.loads(json.dumps(model_config(arm)))).arm
     np.testing.assert_array_equal(back.inverse_dynamics(Q, QD, QDD), arm.inverse_dynamics(Q, QD, QDD))
     # and it matters: the default split gives other torques
     assert np.abs(build_model("segmented", 50).inverse_dynamics(Q, QD, QDD)
@@ -95,11 +123,14 @@ def test_live_request_validation_speaks_ros_parameters() -> None:
               "hand_breadth": 0.0, "split": -1.0, "estimator": "backward",
               "estimator.accel_cutoff_hz": 0.0, "estimator.velocity_cutoff_hz": 0.0}
     req = ModelRequest.from_values(values)
-    assert req.build_kwargs() == {}  # defaults pass no keyword (works with any core)
+    assert req.build_kwargs() == {}  # defaults pass no keyword: the core's defaults apply
     for change, name in [({"body_size": "fifty"}, "body_size"), ({"body_mass": 80.0}, "stature"),
                          ({"stature": 1.8}, "body_mass"), ({"split": -0.5}, "split"),
                          ({"model": "anatomical", "split": 0.5}, "split"),
-                         ({"payload_com": [0.1]}, "payload_com")]:
+                         ({"payload_com": [0.1]}, "payload_com"),
+                         ({"payload_mass": 80.0}, "payload_mass"),
+                         ({"payload_mass": 0.5, "payload_com": [0.4, 0.4, 0.0]}, "payload_com"),
+                         ({"payload_inertia": [1e-3, 0, 0, 0, 0, 0]}, "payload_inertia")]:
         with pytest.raises(ParameterError) as exc:
             ModelRequest.from_values({**values, **change})
         assert exc.value.name == name and "dict" not in str(exc.value), str(exc.value)

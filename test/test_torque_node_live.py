@@ -41,11 +41,16 @@ ACC = RNG.uniform(-2.0, 2.0, 20)
 
 # (sample index at which to ask, parameters set together, expected to succeed)
 CHANGES = [
-    (800, {"body_size": 95}, True),
-    (1600, {"model": "anatomical", "body_size": 5}, True),  # atomically: one config
-    (2200, {"body_size": 51}, False),  # not a body size: refused, nothing changes
-    (2800, {"model": "solid", "estimator.accel_cutoff_hz": 50.0}, True),  # new estimator
+    (700, {"body_size": 95}, True),
+    # the left arm holding a 0.5 kg object (together: side alone gives the same torques,
+    # by the sign conventions; the payload makes the switch visible)
+    (1400, {"side": "left", "payload_mass": 0.5, "payload_com": [0.0, -0.06, -0.04]}, True),
+    (2000, {"model": "anatomical", "body_size": 5}, True),  # atomically: one config
+    (2500, {"body_size": 51}, False),  # not a body size: refused, nothing changes
+    (3000, {"model": "solid", "estimator.accel_cutoff_hz": 50.0}, True),  # new estimator
 ]
+#: config_id each accepted change produces (None: refused)
+IDS = (2, 3, 4, None, 5)
 
 
 def state(t_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -133,12 +138,14 @@ def _live_changes_during_a_1khz_replay() -> None:
         for _, c in configs:
             if c["applies_from_stamp_ns"] is not None:
                 applied[c["config_id"]] = c
-        assert sorted(applied) == [1, 2, 3, 4], sorted(applied)  # the refused change made none
+        assert sorted(applied) == [1, 2, 3, 4, 5], sorted(applied)  # the refused change made none
         models = {i: model_from_config(c).arm for i, c in applied.items()}
         first = {i: c["applies_from_stamp_ns"] for i, c in applied.items()}
-        assert first[1] == 0 and stamps[0] < first[2] < first[3] < first[4] <= stamps[-1]
-        assert applied[4]["estimator"]["settings"]["accel_cutoff_hz"] == 50.0
-        assert (applied[3]["model"], applied[3]["body_size"]["label"]) == ("anatomical", "p5")
+        assert first[1] == 0 and stamps[0] < first[2] < first[3] < first[4] < first[5] <= stamps[-1]
+        assert applied[5]["estimator"]["settings"]["accel_cutoff_hz"] == 50.0
+        assert (applied[3]["side"], applied[3]["payload"]["mass"]) == ("left", 0.5)
+        assert models[3].side == "left" and models[2].side == "right"
+        assert (applied[4]["model"], applied[4]["body_size"]["label"]) == ("anatomical", "p5")
 
         worst = 0.0
         in_force = []
@@ -149,14 +156,14 @@ def _live_changes_during_a_1khz_replay() -> None:
             in_force.append(cid)
             q, qd = state((t - t0) * 1e-9)
             assert np.array_equal(np.asarray(m.position), q)
-            warmup = k == 0 or t == first.get(4)  # start, and the new estimator's first sample
+            warmup = k == 0 or t == first.get(5)  # start, and the new estimator's first sample
             expected = models[cid].inverse_dynamics(q, qd, np.zeros(20) if warmup else ACC)
             err = float(np.abs(np.asarray(m.effort) - expected).max())
             worst = max(worst, err)
             assert err <= 1e-9, (k, cid, err)
         assert in_force == sorted(in_force)  # each config applies from its stamp on
         # the switch is visible: the old model does not fit the first sample of the new
-        for cid in (2, 3, 4):
+        for cid in (2, 3, 4, 5):
             k = out_stamps.index(first[cid])
             q, qd = state((first[cid] - t0) * 1e-9)
             old = models[cid - 1].inverse_dynamics(q, qd, ACC)
@@ -167,7 +174,7 @@ def _live_changes_during_a_1khz_replay() -> None:
         # in which a switch happened against the others, during the replay.
         lines = []
         switch_walls = []
-        for (wall, params, ok, _), cid in zip(asked, (2, 3, None, 4), strict=True):
+        for (wall, params, ok, _), cid in zip(asked, IDS, strict=True):
             if cid is None:
                 continue
             switch_walls.append(first[cid])

@@ -10,10 +10,11 @@ the first output computed with it; 0 = from the start; null = built, not applied
 
 from __future__ import annotations
 
-import inspect
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
+
+import numpy as np
 
 from ..anthropometry import BodySize, resolve_body_size
 from ..dynamics import ArmModel, build_model
@@ -28,7 +29,8 @@ MODEL_KEYS = frozenset({"schema", "model", "body_size", "side", "payload", "plac
 NODE_KEYS = frozenset({"config_id", "applies_from_stamp_ns", "node", "version", "estimator",
                        "input_topic", "output_topic", "max_stamp_gap", "output_rate_hz",
                        "input_timeout", "build_ms"})
-PLACEMENT_KEYS = frozenset({"name", "split", "axis_offset_proximal", "axis_offset_distal"})
+PLACEMENT_KEYS = frozenset({"name", "split", "split_rule", "axis_offset_proximal", "axis_offset_distal",
+                            "cylinder"})
 PAYLOAD_KEYS = frozenset({"mass", "com", "inertia"})
 
 
@@ -78,19 +80,27 @@ def _body_size(d) -> tuple[BodySize, int | None]:
     return size, pct
 
 
-def _build_kwargs(cfg: dict) -> dict:
+def _build_kwargs(cfg: dict, size: BodySize) -> dict:
+    """build_model keywords that rebuild the config's model (checked against it after)."""
     kw: dict = {}
     placement = cfg["placement"]
     if cfg["model"] == "anatomical":
         _require(placement is None, "placement must be null for the anatomical model")
     else:
-        _keys(placement, PLACEMENT_KEYS, frozenset(), "placement")
-        kw.update({k: v for k, v in placement.items() if k != "name"})
-        if placement.get("name"):
+        _keys(placement, PLACEMENT_KEYS, PLACEMENT_KEYS, "placement")
+        kw["cylinder"] = placement["cylinder"]
+        if placement["name"] in ("solid", "custom"):
+            # Offsets are published at this body size; build_model takes them at the 50th
+            # percentile and scales them with the forearm length.
+            k = size.forearm
+            kw["axis_offset_proximal"] = [x / k for x in placement["axis_offset_proximal"]]
+            kw["axis_offset_distal"] = [x / k for x in placement["axis_offset_distal"]]
+            if placement["name"] == "custom":
+                kw["split"] = placement["split"]
+        else:
             kw["placement"] = placement["name"]
     _require(cfg["side"] in ("right", "left"), f"side {cfg['side']!r} is neither right nor left")
-    if cfg["side"] != "right":
-        kw["side"] = cfg["side"]
+    kw["side"] = cfg["side"]
     payload = cfg["payload"]
     if payload is not None:
         _keys(payload, PAYLOAD_KEYS, PAYLOAD_KEYS, "payload")
@@ -98,11 +108,17 @@ def _build_kwargs(cfg: dict) -> dict:
         kw["payload_com"] = tuple(payload["com"])
         if payload["inertia"] is not None:
             kw["payload_inertia"] = tuple(payload["inertia"])
-    accepted = inspect.signature(build_model).parameters
-    for k in ("side", "payload_mass", "placement"):
-        _require(k not in kw or k in accepted,
-                 f"it names {k} = {kw.get(k)!r}, which this forearm_dynamics cannot build")
     return kw
+
+
+def _same_placement(built: dict | None, stated: dict | None) -> bool:
+    if built is None or stated is None:
+        return built is stated
+    return all(
+        np.allclose(built[k], stated[k], rtol=0.0, atol=1e-12) if k.startswith(("axis", "split"))
+        and k != "split_rule" else built[k] == stated[k]
+        for k in PLACEMENT_KEYS
+    )
 
 
 def model_from_config(cfg: dict | None) -> ModelChoice:
@@ -115,7 +131,11 @@ def model_from_config(cfg: dict | None) -> ModelChoice:
     _require(cfg["schema"] == CONFIG_SCHEMA,
              f"schema {cfg['schema']!r} (this forearm_dynamics reads schema {CONFIG_SCHEMA})")
     size, pct = _body_size(cfg["body_size"])
-    arm = build_model(str(cfg["model"]), size, **_build_kwargs(cfg))
+    arm = build_model(str(cfg["model"]), size, **_build_kwargs(cfg, size))
+    _require(_same_placement(None if arm.placement is None else arm.placement.as_dict(),
+                             cfg["placement"]),
+             "placement differs from the model this forearm_dynamics builds from it "
+             "(another version's placements?)")
     _require(tuple(cfg["joint_names"]) == arm.joint_names,
              "joint_names differ from the model's (not this model's config)")
     return ModelChoice(arm, pct, "torque_node/config", [])

@@ -12,19 +12,18 @@ sample computed with it (`applies_from_stamp_ns`).
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import math
 import time
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import pinocchio as pin
 import yaml
 
 from ..anthropometry import DIMENSIONS, resolve_body_size
 from ..bag.model_config import CONFIG_SCHEMA
 from ..builders import MODEL_KINDS
-from ..description import load_description
 from ..dynamics import ArmModel, build_model
 from ..estimation import (
     DEFAULT_ESTIMATOR,
@@ -34,6 +33,7 @@ from ..estimation import (
     make_estimator,
 )
 from ..paths import config_file
+from ..payload import make_payload
 from .params import ParameterError, Spec
 
 SIDES = ("right", "left")
@@ -62,7 +62,9 @@ def _model_specs() -> tuple[Spec, ...]:
         Spec("payload_mass", 0.0, "mass of an object held in the hand; 0 = empty hand", "kg",
              0.0, 50.0, live=True),
         Spec("payload_com", [0.0, 0.0, 0.0], "the object's centre of mass (x, y, z) in the hand "
-             "frame", "m", -0.5, 0.5, live=True),
+             "frame (origin at the wrist centre, x toward the thumb, y toward the elbow, z toward "
+             "the back of the hand); all zeros = the default power-grasp point in the palm",
+             "m", -0.5, 0.5, live=True),
         Spec("payload_inertia", [0.0] * 6, "the object's inertia about its centre of mass "
              "(Ixx, Iyy, Izz, Ixy, Ixz, Iyz); all zeros = a point mass", "kg*m^2", -10.0, 10.0,
              live=True),
@@ -90,11 +92,6 @@ OUTPUT_SPECS = (
     Spec("input_timeout", 0.2, "with output_rate_hz > 0: stop publishing when no input arrived "
          "for this long (never extrapolate further)", "s", 0.001, 3600.0),
 )
-
-
-def _accepts(keyword: str) -> bool:
-    """Whether this build of the core's build_model takes `keyword` (side, payload, placement)."""
-    return keyword in inspect.signature(build_model).parameters
 
 
 @dataclass(frozen=True)
@@ -141,12 +138,10 @@ class ModelRequest:
                   inertia if any(inertia) else None, placement, None if split == -1.0 else split,
                   v["estimator"], tuple((k.removeprefix("estimator."), float(x))
                                         for k, x in sorted(v.items()) if k.startswith("estimator.")))
-        for name, keyword, default in (("side", "side", "right"), ("payload_mass", "payload_mass", 0.0),
-                                       ("placement", "placement", "")):
-            value = getattr(req, keyword)
-            if value != default and not _accepts(keyword):
-                raise ParameterError(name, f"{value!r} needs a model core with '{keyword}' "
-                                     "support; this build has none")
+        try:  # the core's own checks (cheap), so a refused payload never reaches the worker
+            make_payload(req.payload_mass, req.com_or_default(), req.payload_inertia, np.zeros(3))
+        except ValueError as exc:
+            raise ParameterError(str(exc).split(" ", 1)[0], str(exc)) from None
         try:
             make_estimator(req.estimator, 1, req.settings_for(req.estimator))
         except ValueError as exc:
@@ -157,6 +152,10 @@ class ModelRequest:
         names = {s.name for s in ESTIMATORS[method].settings}
         return {k: x for k, x in self.estimator_settings if k in names}
 
+    def com_or_default(self) -> tuple[float, ...] | None:
+        """payload_com, or None (the core's default grasp point) when all zeros."""
+        return None if not any(self.payload_com) else self.payload_com
+
     def build_kwargs(self) -> dict[str, Any]:
         """Keywords for build_model: only those that differ from their defaults."""
         kw: dict[str, Any] = {}
@@ -164,7 +163,7 @@ class ModelRequest:
             kw["side"] = self.side
         if self.payload_mass != 0.0:
             kw["payload_mass"] = self.payload_mass
-            kw["payload_com"] = self.payload_com
+            kw["payload_com"] = self.com_or_default()
             if self.payload_inertia is not None:
                 kw["payload_inertia"] = self.payload_inertia
         if self.placement:
@@ -225,46 +224,28 @@ def build_bundle(request: ModelRequest, config_id: int, n: int,
         est = make_estimator(request.estimator, n, request.settings_for(request.estimator))
     ms = (time.perf_counter() - t0) * 1e3
     return ModelBundle(config_id, request, arm, arm.model, arm.data, est,
-                       model_config(arm, request.split, request), ms)
+                       model_config(arm), ms)
 
 
-def _placement(arm: ArmModel, split: float | None, request: ModelRequest | None) -> dict | None:
-    """The pro/sup placement that was built (None for the anatomical model)."""
-    if arm.kind == "anatomical":
-        return None
-    built = getattr(arm, "placement", None)  # a core that records what it built
-    if isinstance(built, dict):
-        return {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in built.items()}
-    name = request.placement if request is not None else ""
-    if name:  # a named variant of the core: its name rebuilds it
-        out: dict = {"name": name}
-        if split is not None:
-            out["split"] = split
-        return out
-    # builders.build_tree's defaults: the solid model turns about the cylinder's own axis
-    # (split 0, no offsets); the segmented model uses config/model.yaml's values.
-    s = load_description().simplified
-    if arm.kind == "solid":
-        return {"split": 0.0, "axis_offset_proximal": [0.0, 0.0], "axis_offset_distal": [0.0, 0.0]}
-    return {"split": s.split if split is None else split,
-            "axis_offset_proximal": s.axis_offset_proximal.tolist(),
-            "axis_offset_distal": s.axis_offset_distal.tolist()}
+def _placement(arm: ArmModel) -> dict | None:
+    """The pro/sup placement that was built (None for the anatomical model): name, split,
+    split rule, axis offsets (m, at this body size) and cylinder, as the core reports it."""
+    return None if arm.placement is None else arm.placement.as_dict()
 
 
-def model_config(arm: ArmModel, split: float | None = None, request: ModelRequest | None = None) -> dict:
+def model_config(arm: ArmModel) -> dict:
     """The model part of the config message: exactly what was built (bag/model_config.py
     reads it back, strictly)."""
     payload = None
-    if request is not None and request.payload_mass > 0.0:
-        payload = {"mass": request.payload_mass, "com": list(request.payload_com),
-                   "inertia": list(request.payload_inertia) if request.payload_inertia else None}
+    if arm.payload is not None:
+        payload = arm.payload.as_dict()
     out = {
         "schema": CONFIG_SCHEMA,
         "model": arm.kind,
         "body_size": dataclasses.asdict(arm.body_size),
-        "side": request.side if request is not None else "right",
+        "side": arm.side,
         "payload": payload,
-        "placement": _placement(arm, split, request),
+        "placement": _placement(arm),
         "joint_names": list(arm.joint_names),
     }
     if any(isinstance(x, float) and not math.isfinite(x) for x in out["body_size"].values()):
