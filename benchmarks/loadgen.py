@@ -28,6 +28,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
 from forearm_dynamics.description import JOINT_NAMES
+from forearm_dynamics.exit_codes import DATA, OK
 from forearm_dynamics.nodes.common import stream_qos
 
 
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
         while any(p.get_subscription_count() == 0 for p in pubs):
             if time.monotonic() > deadline:
                 print("LOADGEN " + json.dumps({"error": "no subscriber"}), flush=True)
-                return 1
+                return DATA
             time.sleep(0.05)
         time.sleep(args.pause)  # discovery settles both ways
         buf = template()
@@ -109,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(args.pause)
         print("LOADGEN " + json.dumps({"topics": [p.topic_name for p in pubs], "steps": steps}),
               flush=True)
-        return 0
+        return OK
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

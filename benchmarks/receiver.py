@@ -28,6 +28,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
+from forearm_dynamics.exit_codes import OK
 from forearm_dynamics.nodes.common import make_executor, spin, stream_qos
 
 
@@ -100,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     print(f"receiver: {len(rx.recv_ns)} messages", flush=True)
-    return 0
+    return OK
 
 
 if __name__ == "__main__":

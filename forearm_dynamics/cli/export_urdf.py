@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .. import build_model
 from ..builders import MODEL_KINDS
+from ..exit_codes import OK
 from .common import body_size_arg, die
 
 
@@ -26,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
         return die(f"export_urdf: {exc}")
     if args.output == "-":
         sys.stdout.write(urdf)
-        return 0
+        return OK
     out = Path(args.output)
     try:
         tmp = out.with_name(out.name + ".tmp")
@@ -35,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         return die(f"export_urdf: cannot write {out}: {exc.strerror or exc}")
     print(f"wrote {out} ({args.model}, body size {args.body_size})", file=sys.stderr)
-    return 0
+    return OK
 
 
 if __name__ == "__main__":
