@@ -45,7 +45,7 @@ setup(
     extras_require={
         "plots": ["matplotlib>=3.7"],
         "reference": ["opensim==4.6"],
-        "test": ["pytest>=8", "rosbags>=0.10", "ruff>=0.5", "colcon-common-extensions", "colcon-ros"],
+        "test": ["pytest>=8", "hypothesis>=6.100", "rosbags>=0.10", "ruff>=0.5", "colcon-common-extensions", "colcon-ros"],
     },
     zip_safe=True,
     maintainer="forearm_dynamics developers",
