@@ -258,5 +258,6 @@ def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * M
     expected = MODEL.inverse_dynamics(pos, vel, qdd)
     err = np.abs(eff - expected).max(axis=1)
     bad = np.flatnonzero(~(err < 1e-8))
-    assert not len(bad), f"{len(bad)} torques differ from the model, first at stamp {t[bad[0]]}: {err[bad[0]]}"
+    assert not len(bad), (f"{len(bad)} torques differ from the model, first at stamp {t[bad[0]]}: "
+                          f"{err[bad[0]]}")
     return int((~cont).sum()) + 1
