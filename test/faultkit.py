@@ -204,16 +204,13 @@ def start_feeder(procs: Procs, tmp: Path, domain: int, *, count: int, rate_hz: f
     """Publish `count` JointStates at rate_hz (0 = as fast as possible); stamps go to a file."""
     import json
 
-    out, log = tmp / f"{name}_stamps.txt", tmp / f"{name}.log"
+    out = tmp / f"{name}_stamps.txt"
     cfg = {"names": list(names), "position": [float(x) for x in position],
            "velocity": [0.0] * len(names) if velocity is None else [float(x) for x in velocity],
            "rate_hz": rate_hz, "count": count, "step_ns": step_ns, "depth": depth, "out": str(out)}
-    with log.open("wb") as fh:
-        proc = subprocess.Popen([sys.executable, "-c", FEEDER, json.dumps(cfg)],
-                                env=rosproc.ros_env(domain), stdout=fh, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL)
-    procs.add(proc)
-    return proc, out, log
+    feeder = procs.add(rosproc.NodeProcess(name, [sys.executable, "-c", FEEDER, json.dumps(cfg)],
+                                           rosproc.ros_env(domain), tmp))
+    return feeder.proc, out, feeder.log
 
 
 

@@ -170,20 +170,17 @@ def _record_until_failure(procs: Procs, tmp: Path, out: Path, file_limit: int | 
     """Feeder (1 kHz, 4 s) -> bag_recorder writing to `out` until a write fails."""
     domain = private_domain()
     env = rosproc.ros_env(domain)
-    log = tmp / "recorder.log"
     args = [str(rosproc.BIN / "bag_recorder"), "--ros-args", "-p", f"output:={out}",
             "-p", "compression:=none", "-p", "chunk_size:=65536", "-p", "flush_period:=0.2"]
     if file_limit is not None:
         args = [sys.executable, "-c", FSIZE_WRAPPER, str(file_limit), *args]
-    with log.open("wb") as fh:
-        rec = procs.add(subprocess.Popen(args, env=env, stdout=fh, stderr=subprocess.STDOUT,
-                                         stdin=subprocess.DEVNULL))
+    rec = procs.add(rosproc.NodeProcess("recorder", args, env, tmp))
     feeder, stamps_file, flog = start_feeder(procs, tmp, domain, count=4000, rate_hz=1000.0)
     code = rec.wait(timeout=60)
     feeder.wait(timeout=60)
     assert feeder.returncode == 0, flog.read_text()
     sent = np.array([int(s) for s in stamps_file.read_text().split()])
-    return code, log.read_text(), sent
+    return code, rec.text(), sent
 
 
 def _check_partial(out: Path, output: str, sent: np.ndarray, tmp: Path) -> str:
