@@ -179,12 +179,15 @@ class ProcStat:
 
 
 def proc_stat(pid: int) -> ProcStat | None:
-    """CPU seconds and memory of a live process from /proc; None once it is gone."""
+    """CPU seconds and memory of a live process from /proc; None once it is gone.
+
+    An exited child not yet reaped (a zombie) has no memory lines: None too, not zeros.
+    """
     try:
         with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
             fields = fh.read().rsplit(")", 1)[1].split()
         cpu = (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime, stime (fields 14, 15)
-        rss = hwm = 0
+        rss = hwm = None
         with open(f"/proc/{pid}/status", encoding="ascii") as fh:
             for line in fh:
                 if line.startswith("VmRSS:"):
@@ -192,6 +195,8 @@ def proc_stat(pid: int) -> ProcStat | None:
                 elif line.startswith("VmHWM:"):
                     hwm = int(line.split()[1])
     except (OSError, IndexError, ValueError):
+        return None
+    if rss is None or hwm is None:
         return None
     return ProcStat(cpu, rss, hwm)
 
