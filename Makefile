@@ -28,13 +28,14 @@ demo: setup
 lint: setup
 	$(VENV)/bin/ruff check .
 
+# benchmarks/ is not part of the installed package: run from the repository root
 bench: setup
-	ROS_DOMAIN_ID=75 $(PY) -m forearm_dynamics.bench --out benchmarks/results.json
+	ROS_DOMAIN_ID=75 $(PY) -m benchmarks --out benchmarks/results.json
 
 # 10 min of looping replay at 1 kHz (make soak SOAK_MINUTES=2 for a shorter run)
 SOAK_MINUTES ?= 10
 soak: setup
-	ROS_DOMAIN_ID=77 $(PY) -m forearm_dynamics.bench.soak --minutes $(SOAK_MINUTES) --out benchmarks/soak.json
+	ROS_DOMAIN_ID=77 $(PY) -m benchmarks.soak --minutes $(SOAK_MINUTES) --out benchmarks/soak.json
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache

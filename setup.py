@@ -22,7 +22,7 @@ EXECUTABLES = {
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=find_packages(exclude=["test", "test.*"]),
+    packages=find_packages(exclude=["test", "test.*", "benchmarks", "benchmarks.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -35,17 +35,20 @@ setup(
         "pin>=3.0",
         "pyyaml>=6",
         "scipy>=1.11",
-        "mcap>=1.2",
+        "mcap>=1.5",  # Writer.flush() (public) first in 1.5.0
         "ros-jazzy-rclpy",
         "ros-jazzy-rmw-fastrtps-cpp",
         "ros-jazzy-sensor-msgs",
         "ros-jazzy-std-msgs",
         "ros-jazzy-diagnostic-msgs",
+        "ros-jazzy-builtin-interfaces",
+        "ros-jazzy-rcl-interfaces",
     ],
     extras_require={
         "plots": ["matplotlib>=3.7"],
         "reference": ["opensim==4.6"],
-        "test": ["pytest>=8", "rosbags>=0.10", "ruff>=0.5", "colcon-common-extensions", "colcon-ros"],
+        "test": ["pytest>=8", "hypothesis>=6.100", "rosbags>=0.10", "ruff>=0.5",
+                 "colcon-common-extensions", "colcon-ros"],
     },
     zip_safe=True,
     maintainer="forearm_dynamics developers",

@@ -26,10 +26,6 @@ class BodySize:
     hand_breadth: float
     mass: float  # body mass ratio
 
-    @property
-    def is_reference(self) -> bool:
-        return (self.forearm, self.hand_length, self.hand_breadth, self.mass) == (1, 1, 1, 1)
-
 
 @lru_cache(maxsize=1)
 def _table() -> dict[str, Any]:

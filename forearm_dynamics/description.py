@@ -130,9 +130,6 @@ class ModelDescription:
     hand: HandDescription
     ranges: dict[str, tuple[float, float]]  # joint name -> (lower, upper), rad
 
-    def range_of(self, joint: str) -> tuple[float, float]:
-        return self.ranges[joint]
-
 
 def inertia_matrix(six: list[float]) -> np.ndarray:
     """[Ixx, Iyy, Izz, Ixy, Ixz, Iyz] -> symmetric 3x3."""

@@ -125,9 +125,6 @@ class ArmModel:
 
         return tree_to_urdf(self.tree)
 
-    def neutral(self) -> np.ndarray:
-        return np.zeros(self.nv)
-
     def gravity_torques(self, q) -> np.ndarray:
         z = np.zeros(self.nv)
         return self.inverse_dynamics(q, z, z)

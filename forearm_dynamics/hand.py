@@ -58,7 +58,8 @@ def hand_subtree(
     links.append(massless("thumb_cmc"))
     joint("thumb_cmc_abduction", "thumb_cmc", "thumb_metacarpal", np.zeros(3), abd_axis)
     parent_link, offset = "thumb_metacarpal", 0.0
-    for seg, jname in (("metacarpal", None), ("proximal", "thumb_mcp_flexion"), ("distal", "thumb_ip_flexion")):
+    thumb = (("metacarpal", None), ("proximal", "thumb_mcp_flexion"), ("distal", "thumb_ip_flexion"))
+    for seg, jname in thumb:
         name = f"thumb_{seg}"
         if jname:
             joint(jname, parent_link, name, offset * d, -Z)

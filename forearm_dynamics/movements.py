@@ -65,9 +65,6 @@ class Movement:
         qdd = (dds / self.transition**2)[:, None] * delta
         return q, qd, qdd
 
-    def describe(self) -> dict:
-        return {"id": self.id, "name": self.name, "elbow": self.elbow, "duration": self.duration}
-
 
 @lru_cache(maxsize=1)
 def _spec() -> dict:

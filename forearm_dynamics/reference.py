@@ -83,7 +83,8 @@ def read_reference(path: Path) -> ReferenceTorques:
         if names != JOINT_NAMES:
             raise ValueError(f"{path}: joint order {names} differs from JOINT_NAMES")
         return ReferenceTorques(
-            torques_all=decode_torques(z["torques_code"], z["shape"]), body_sizes=tuple(int(b) for b in z["body_sizes"]),
+            torques_all=decode_torques(z["torques_code"], z["shape"]),
+            body_sizes=tuple(int(b) for b in z["body_sizes"]),
             movement_ids=tuple(int(m) for m in z["movement_ids"]), rate_hz=float(z["rate_hz"]),
             joint_names=names, meta=json.loads(str(z["meta"])),
         )

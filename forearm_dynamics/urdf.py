@@ -47,7 +47,8 @@ def tree_to_urdf(tree: KinematicTree) -> str:
             f'    <parent link="{j.parent}"/>\n    <child link="{j.child}"/>\n'
             f'    <origin xyz="{_v(j.origin)}" rpy="0 0 0"/>\n'
             f'    <axis xyz="{_v(j.axis)}"/>\n'
-            f'    <limit lower="{float(j.lower)!r}" upper="{float(j.upper)!r}" effort="1000" velocity="100"/>\n'
+            f'    <limit lower="{float(j.lower)!r}" upper="{float(j.upper)!r}"'
+            ' effort="1000" velocity="100"/>\n'
             "  </joint>"
         )
     for w in tree.fixed_joints:

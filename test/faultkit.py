@@ -167,8 +167,18 @@ rclpy.init()
 node = rclpy.create_node("fault_feeder")
 pub = node.create_publisher(JointState, cfg.get("topic", "joint_states"),
                             QoSProfile(depth=cfg.get("depth", 1000)))
+burst, answered = cfg.get("burst", 0), set()
+if burst:  # pace by the answers: wait for the last one of a burst before the next burst
+    import struct
+    unpack = struct.Struct("<iI").unpack_from
+    def on_answer(raw):
+        sec, nsec = unpack(raw, 4)
+        answered.add(sec * 10**9 + nsec)
+    node.create_subscription(JointState, cfg["answers_topic"], on_answer,
+                             QoSProfile(depth=cfg.get("depth", 1000)), raw=True)
 deadline = time.monotonic() + 30
-while pub.get_subscription_count() < cfg.get("subscribers", 1) and time.monotonic() < deadline:
+while (pub.get_subscription_count() < cfg.get("subscribers", 1)
+       or (burst and node.count_publishers(cfg["answers_topic"]) < 1)) and time.monotonic() < deadline:
     rclpy.spin_once(node, timeout_sec=0.05)
 time.sleep(cfg.get("settle", 1.0))  # let the reliable matches settle on both sides
 n = len(cfg["position"])
@@ -177,10 +187,16 @@ rate, count, step = cfg["rate_hz"], cfg["count"], cfg.get("step_ns", 0)
 stamps = []
 t_first = time.time_ns()
 print("publishing", flush=True)
-start = time.perf_counter()
+start = burst_start = time.perf_counter()
+k0 = 0
 for k in range(count):
+    if burst and k and k % burst == 0:
+        wait_until = time.monotonic() + 120
+        while stamps[-1] not in answered and time.monotonic() < wait_until:
+            rclpy.spin_once(node, timeout_sec=0.01)
+        burst_start, k0 = time.perf_counter(), k
     if rate > 0:
-        target = start + k / rate
+        target = burst_start + (k - k0) / rate
         while (now := time.perf_counter()) < target:
             if target - now > 0.0003:
                 time.sleep(target - now - 0.0002)
@@ -200,20 +216,22 @@ rclpy.shutdown()
 
 def start_feeder(procs: Procs, tmp: Path, domain: int, *, count: int, rate_hz: float,
                  names=JOINT_NAMES, position=POSTURE, velocity=None, step_ns: int = 0,
-                 depth: int = 1000, name: str = "feeder") -> tuple[subprocess.Popen, Path, Path]:
-    """Publish `count` JointStates at rate_hz (0 = as fast as possible); stamps go to a file."""
+                 depth: int = 1000, name: str = "feeder", burst: int = 0,
+                 answers_topic: str = "joint_torques") -> tuple[subprocess.Popen, Path, Path]:
+    """Publish `count` JointStates at rate_hz (0 = as fast as possible); stamps go to a file.
+
+    `burst` > 0: after every `burst` samples, wait until the last one is answered on
+    `answers_topic` (a busy machine then slows the feed instead of overflowing queues)."""
     import json
 
-    out, log = tmp / f"{name}_stamps.txt", tmp / f"{name}.log"
+    out = tmp / f"{name}_stamps.txt"
     cfg = {"names": list(names), "position": [float(x) for x in position],
            "velocity": [0.0] * len(names) if velocity is None else [float(x) for x in velocity],
-           "rate_hz": rate_hz, "count": count, "step_ns": step_ns, "depth": depth, "out": str(out)}
-    with log.open("wb") as fh:
-        proc = subprocess.Popen([sys.executable, "-c", FEEDER, json.dumps(cfg)],
-                                env=rosproc.ros_env(domain), stdout=fh, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL)
-    procs.add(proc)
-    return proc, out, log
+           "rate_hz": rate_hz, "count": count, "step_ns": step_ns, "depth": depth, "out": str(out),
+           "burst": burst, "answers_topic": answers_topic}
+    feeder = procs.add(rosproc.NodeProcess(name, [sys.executable, "-c", FEEDER, json.dumps(cfg)],
+                                           rosproc.ros_env(domain), tmp))
+    return feeder.proc, out, feeder.log
 
 
 
@@ -258,5 +276,6 @@ def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * M
     expected = MODEL.inverse_dynamics(pos, vel, qdd)
     err = np.abs(eff - expected).max(axis=1)
     bad = np.flatnonzero(~(err < 1e-8))
-    assert not len(bad), f"{len(bad)} torques differ from the model, first at stamp {t[bad[0]]}: {err[bad[0]]}"
+    assert not len(bad), (f"{len(bad)} torques differ from the model, first at stamp {t[bad[0]]}: "
+                          f"{err[bad[0]]}")
     return int((~cont).sum()) + 1

@@ -12,13 +12,14 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
-BIN = Path(sys.executable).parent  # the venv's console scripts sit next to its python
+from forearm_dynamics import processes
+from forearm_dynamics.processes import BIN, Child
+
+__all__ = ["BIN", "NodeProcess", "Peer", "apply_to_this_process", "domain_id", "ros_env", "start"]
 
 
 def domain_id() -> int:
@@ -28,24 +29,14 @@ def domain_id() -> int:
     return 1 + seed % 101
 
 
-_LOG_DIR = tempfile.mkdtemp(prefix="forearm_test_roslog_")
+_LOG_DIR = Path(tempfile.mkdtemp(prefix="forearm_test_roslog_"))
 if not os.environ.get("KEEP_ROS_TEST_LOGS"):  # node output is read during the test itself
     atexit.register(shutil.rmtree, _LOG_DIR, ignore_errors=True)
 
 
 def ros_env(domain: int | None = None) -> dict[str, str]:
     """The environment for child nodes: inherited PATH etc., ROS settings made explicit."""
-    drop = ("ROS_", "RMW_", "FASTRTPS", "FASTDDS", "LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP")
-    env = {k: v for k, v in os.environ.items() if not k.startswith(drop)}
-    env.update(
-        ROS_DOMAIN_ID=str(domain if domain is not None else domain_id()),
-        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-        ROS_LOG_DIR=_LOG_DIR,
-        HOME=os.environ.get("HOME") or tempfile.gettempdir(),
-        PYTHONUNBUFFERED="1",
-        RCUTILS_COLORIZED_OUTPUT="0",
-    )
-    return env
+    return processes.ros_env(domain if domain is not None else domain_id(), _LOG_DIR)
 
 
 def apply_to_this_process() -> None:
@@ -53,68 +44,44 @@ def apply_to_this_process() -> None:
     os.environ.update({k: v for k, v in ros_env().items() if k.startswith(("ROS_", "HOME"))})
 
 
-@dataclass
-class NodeProcess:
-    """One started executable; output goes to files so a chatty node never blocks."""
-
-    name: str
-    args: list[str]
-    proc: subprocess.Popen = field(repr=False)
-    out_path: Path
-    err_path: Path
+class NodeProcess(Child):
+    """One started executable (processes.Child, stdout and stderr in files of their own),
+    with the test-friendly names and strictness: wait() raises on timeout, stop() raises
+    after killing a node that ignored the signal."""
 
     @property
-    def pid(self) -> int:
-        return self.proc.pid
+    def args(self) -> list[str]:
+        return self.argv
 
-    def running(self) -> bool:
-        return self.proc.poll() is None
+    @property
+    def out_path(self) -> Path:
+        return self.log
 
-    def stdout(self) -> str:
-        return self.out_path.read_text(errors="replace")
-
-    def stderr(self) -> str:
-        return self.err_path.read_text(errors="replace")
+    @property
+    def err_path(self) -> Path:
+        return self.err_log or self.log
 
     def output(self) -> str:
-        return self.stdout() + self.stderr()
+        return self.text()
 
     def wait_for_output(self, text: str, timeout: float = 10.0) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if text in self.output():
-                return True
-            if not self.running():
-                return text in self.output()
-            time.sleep(0.05)
-        return False
+        return self.wait_for(text, timeout)
 
     def wait(self, timeout: float = 30.0) -> int:
-        return self.proc.wait(timeout=timeout)
+        code = super().wait(timeout)
+        if code is None:
+            raise subprocess.TimeoutExpired(self.argv, timeout)
+        return code
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
-        """Signal this process (only it), wait, escalate to SIGKILL if it hangs."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                return self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=5)
-                raise
-        return self.proc.returncode
+        """Signal this process (only it), wait, escalate to SIGKILL if it hangs (and raise)."""
+        return super().stop(sig, timeout, strict=True)
 
 
 def start(executable: str, *ros_args: str, domain: int | None = None) -> NodeProcess:
     """Start a console script of this venv with `--ros-args *ros_args` (if any)."""
-    args = [str(BIN / executable)]
-    if ros_args:
-        args += ["--ros-args", *ros_args]
-    out = Path(tempfile.mkstemp(prefix=f"{executable}_", suffix=".out", dir=_LOG_DIR)[1])
-    err = out.with_suffix(".err")
-    with out.open("wb") as fo, err.open("wb") as fe:
-        proc = subprocess.Popen(args, env=ros_env(domain), stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
-    return NodeProcess(executable, args, proc, out, err)
+    return NodeProcess.script(executable, list(ros_args), ros_env(domain), _LOG_DIR,
+                              split_stderr=True)
 
 
 class Peer:

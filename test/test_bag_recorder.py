@@ -66,12 +66,9 @@ def private_domain() -> int:
 
 def start_publisher(tmp_path: Path, domain: int, duration: float) -> tuple[subprocess.Popen, Path, Path]:
     stamps = tmp_path / "stamps.txt"
-    log = tmp_path / "publisher.out"
-    with log.open("wb") as fh:
-        proc = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(duration), str(stamps)],
-                                env=rosproc.ros_env(domain), stdout=fh, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL)
-    return proc, stamps, log
+    pub = rosproc.NodeProcess("publisher", [sys.executable, "-c", PUBLISHER, str(duration), str(stamps)],
+                              rosproc.ros_env(domain), tmp_path)
+    return pub.proc, stamps, pub.log
 
 
 def wait_for(path: Path, text: str, timeout: float = 30.0) -> str:

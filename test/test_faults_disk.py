@@ -170,20 +170,17 @@ def _record_until_failure(procs: Procs, tmp: Path, out: Path, file_limit: int | 
     """Feeder (1 kHz, 4 s) -> bag_recorder writing to `out` until a write fails."""
     domain = private_domain()
     env = rosproc.ros_env(domain)
-    log = tmp / "recorder.log"
     args = [str(rosproc.BIN / "bag_recorder"), "--ros-args", "-p", f"output:={out}",
             "-p", "compression:=none", "-p", "chunk_size:=65536", "-p", "flush_period:=0.2"]
     if file_limit is not None:
         args = [sys.executable, "-c", FSIZE_WRAPPER, str(file_limit), *args]
-    with log.open("wb") as fh:
-        rec = procs.add(subprocess.Popen(args, env=env, stdout=fh, stderr=subprocess.STDOUT,
-                                         stdin=subprocess.DEVNULL))
+    rec = procs.add(rosproc.NodeProcess("recorder", args, env, tmp))
     feeder, stamps_file, flog = start_feeder(procs, tmp, domain, count=4000, rate_hz=1000.0)
     code = rec.wait(timeout=60)
     feeder.wait(timeout=60)
     assert feeder.returncode == 0, flog.read_text()
     sent = np.array([int(s) for s in stamps_file.read_text().split()])
-    return code, log.read_text(), sent
+    return code, rec.text(), sent
 
 
 def _check_partial(out: Path, output: str, sent: np.ndarray, tmp: Path) -> str:
@@ -252,3 +249,64 @@ def test_disk_full_at_close(small_disk, tmp_path) -> None:
     assert bag.info.message_count == kept and not bag.info.complete
     assert recover(out, tmp_path / "fixed.mcap").messages == kept
     print(f"disk full at close: {n} written, {kept} in completed chunks kept, error: {err.value}")
+
+
+
+def test_write_failure_keeps_what_it_says(tmp_path, monkeypatch) -> None:
+    """In-process, at chosen failure points: the file ends after byte `limit` (as
+    RLIMIT_FSIZE or a full disk cut it). The error's "completed chunks keep N" is exactly
+    what a reader finds in the file wherever the cut falls: inside a Chunk record, or just
+    after one, in the message index records mcap writes next (the case that made the
+    recorder report 378 messages kept while the file held 456)."""
+    import errno
+
+    from mcap.opcode import Opcode
+
+    import forearm_dynamics.bag.writer as writer_module
+
+    real_write = os.write
+    msgs = [serialize_message(joint_state(10**18 + n * 10**6, POSTURE)) for n in range(150)]
+    calls: list[tuple[int, int, int]] = []  # (offset, length, opcode) of each write call
+
+    def logged_write(fd, data):
+        n = real_write(fd, data)
+        calls.append((sum(c[1] for c in calls), n, data[0] if n else -1))
+        return n
+
+    def record(path, write) -> BagWriter:
+        monkeypatch.setattr(writer_module.os, "write", write)
+        try:
+            w = BagWriter(path, compression="none", chunk_size=4096, flush_period_s=3600)
+            ch = w.add_topic("/joint_states", "sensor_msgs/msg/JointState")
+            for n, m in enumerate(msgs):
+                w.write(ch, m, 10**18 + n)
+            w.close()
+        finally:
+            monkeypatch.setattr(writer_module.os, "write", real_write)
+        return w
+
+    record(tmp_path / "probe.mcap", logged_write)
+    chunks = [(off, n) for off, n, op in calls if op == Opcode.CHUNK]
+    assert len(chunks) >= 4, calls
+    limits = {"inside a chunk": [off + n // 2 for off, n in chunks[1:4]],
+              "after a whole chunk": [off + n for off, n in chunks[1:4]]}
+    for where, cuts in limits.items():
+        for limit in cuts:
+            out = tmp_path / f"cut_{limit}.mcap"
+            written = [0]
+
+            def limited_write(fd, data, _written=written, _limit=limit):
+                room = _limit - _written[0]
+                if room <= 0:
+                    raise OSError(errno.EFBIG, "File too large")
+                n = real_write(fd, bytes(data[:room]))
+                _written[0] += n
+                return n
+
+            with pytest.raises(BagWriteError) as err:
+                record(out, limited_write)
+            kept = int(re.search(r"completed chunks keep (\d+) messages", str(err.value)).group(1))
+            bag = open_bag(out)
+            assert bag.info.message_count == kept > 0, (where, limit, str(err.value))
+            assert bag.info.good_bytes == out.stat().st_size, (where, limit, bag.info.problem)
+            assert recover(out, tmp_path / f"fixed_{limit}.mcap").messages == kept

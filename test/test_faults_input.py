@@ -340,7 +340,10 @@ def test_burst_of_10000_good_messages(h, procs, tmp_path) -> None:
 
 def test_5khz_input_for_10s(procs, tmp_path) -> None:
     """50 000 samples at 5 kHz: every one answered, exact torques. The node runs with
-    qos_depth 5000 = 1 s of input, the sizing rule of config/torque_node.yaml at 5 kHz."""
+    qos_depth 5000 = 1 s of input, the sizing rule of config/torque_node.yaml at 5 kHz.
+    The feeder sends bursts of 2 500 (0.5 s at 5 kHz, half the queue) and waits for the
+    last answer of each before the next: on a machine too busy to sustain 5 kHz the test
+    takes longer instead of overflowing the queue (how fast the node is: make bench)."""
     fast = TorqueHarness(procs, "-p", "qos_depth:=5000")
     try:
         got: dict[int, bytes] = {}
@@ -349,8 +352,8 @@ def test_5khz_input_for_10s(procs, tmp_path) -> None:
                                            stream_qos(5000), raw=True)
         before = fast.diag.fresh()
         feeder, stamps_file, log = start_feeder(procs, tmp_path, fast.domain, count=50_000,
-                                                rate_hz=5000.0, depth=5000)
-        fast.peer.spin_until(lambda: feeder.poll() is not None, 90)
+                                                rate_hz=5000.0, depth=5000, burst=2500)
+        fast.peer.spin_until(lambda: feeder.poll() is not None, 300)  # a bound, not a target
         assert feeder.returncode == 0, log.read_text()
         sent = [int(s) for s in stamps_file.read_text().split()]
         assert len(sent) == 50_000

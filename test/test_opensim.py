@@ -11,7 +11,7 @@ import pytest
 
 from forearm_dynamics import build_model
 from forearm_dynamics.dynamics import ArmModel
-from forearm_dynamics.opensim_engine import OpenSimArm, opensim_available
+from forearm_dynamics.opensim_engine import OpenSimArm
 
 osim = pytest.importorskip("opensim")  # the optional [reference] extra; only a guard
 
@@ -40,10 +40,6 @@ def _trajectory(arm: ArmModel, n: int = 200, seed: int = 0) -> tuple[np.ndarray,
     qd = half * (amp * w * np.cos(arg)).sum(-1)
     qdd = -half * (amp * w**2 * np.sin(arg)).sum(-1)
     return q, qd, qdd
-
-
-def test_opensim_available() -> None:
-    assert opensim_available()
 
 
 @pytest.mark.parametrize(("kind", "size"), CASES)

@@ -12,10 +12,12 @@ from __future__ import annotations
 
 import io
 import os
+import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from mcap.exceptions import EndOfFile
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -126,7 +128,8 @@ def _records(fh: io.BufferedReader, info: BagInfo) -> Iterator[object]:
 
 
 def _damage_text(offset: int, size: int, exc: Exception) -> str:
-    if offset >= size or "EndOfFile" in type(exc).__name__ or "unpack" in str(exc):
+    # mcap raises EndOfFile when a record's bytes stop short, struct.error when a header does
+    if offset >= size or isinstance(exc, (EndOfFile, struct.error)):
         return f"file ends inside a record at byte {offset} of {size}"
     return f"unreadable record at byte {offset} of {size} ({type(exc).__name__}: {exc})"
 

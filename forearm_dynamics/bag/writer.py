@@ -16,6 +16,9 @@ Format decisions (why):
   fail fast. What was written up to the last complete chunk stays readable
   (`check_bag BAG --recover OUT`). `durable_count` is the number of messages in chunks
   already handed to the kernel; `on_chunk(durable_count)` is called after each chunk.
+  A chunk counts as durable the moment its Chunk record is completely in the file (mcap
+  writes its message indexes in a second write, which may be the one that fails): the
+  count in the error is then exactly what a reader finds in the file.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Self
 
+from mcap.opcode import Opcode
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
@@ -69,18 +73,26 @@ def library_string() -> str:
 
 
 class _FdSink:
-    """The minimal stream mcap's Writer needs (write/tell/flush), unbuffered on a file descriptor."""
+    """The minimal stream mcap's Writer needs (write/tell/flush), unbuffered on a file descriptor.
 
-    def __init__(self, fd: int):
+    mcap's Writer hands each Chunk record over in one write() call; `on_chunk` is called
+    once such a call has put every byte of the record into the file.
+    """
+
+    def __init__(self, fd: int, on_chunk: Callable[[], None]):
         self.fd = fd
         self.pos = 0
+        self.on_chunk = on_chunk
 
     def write(self, data) -> int:
         view = memoryview(data)
         n = len(view)
+        chunk = n > 0 and view[0] == Opcode.CHUNK
         while view:
             view = view[os.write(self.fd, view):]
         self.pos += n
+        if chunk:
+            self.on_chunk()
         return n
 
     def tell(self) -> int:
@@ -147,10 +159,11 @@ class BagWriter:
         self._closed = False
         self._error: BagWriteError | None = None
         self._durable = 0  # messages in chunks already written to the file
+        self._staged = 0  # messages handed to mcap's Writer (in a chunk, written or open)
         self.on_chunk: Callable[[int], None] | None = None
         self._fd = open_exclusive(self.path, overwrite)
         try:
-            self._sink = _FdSink(self._fd)
+            self._sink = _FdSink(self._fd, self._chunk_written)
             self._mcap = McapWriter(self._sink, chunk_size=chunk_size,
                                     compression=COMPRESSION[compression])
             self._last_flush = time.monotonic()
@@ -199,7 +212,8 @@ class BagWriter:
         st = self._stats
         ch = st.channels[channel_id]
         seq = self._seq[channel_id] = self._seq[channel_id] + 1 if sequence is None else sequence
-        pos = self._sink.pos
+        st.count += 1  # counted from here: written, or lost with the open chunk
+        self._staged = st.count  # a chunk written now holds this message too
         try:
             self._mcap.add_message(channel_id, log_time_ns, data,
                                    log_time_ns if publish_time_ns is None else publish_time_ns, seq)
@@ -208,11 +222,8 @@ class BagWriter:
         except OSError as exc:
             raise self._fail(exc) from None
         ch.count += 1
-        st.count += 1
         st.start_ns = min(st.start_ns, log_time_ns)
         st.end_ns = max(st.end_ns, log_time_ns)
-        if self._sink.pos != pos:  # a chunk (this message its last) reached the file
-            self._chunk_written()
 
     def flush_if_due(self) -> None:
         """Close the open chunk if it is older than flush_period_s (call from a timer)."""
@@ -226,14 +237,13 @@ class BagWriter:
             self._guard(self._flush_chunk)
 
     def _flush_chunk(self) -> None:
-        pos = self._sink.pos
+        self._staged = self._stats.count
         self._mcap.flush()
         self._last_flush = time.monotonic()
-        if self._sink.pos != pos:
-            self._chunk_written()
 
     def _chunk_written(self) -> None:
-        self._durable = self._stats.count
+        """The sink wrote a whole Chunk record: every message staged so far is in the file."""
+        self._durable = self._staged
         if self.on_chunk is not None:
             self.on_chunk(self._durable)
 

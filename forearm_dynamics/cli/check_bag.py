@@ -25,6 +25,7 @@ from ..bag import BagError, open_bag, recover
 from ..bag.check import CheckReport, Thresholds, analyse
 from ..bag.decode import read_config, read_recording
 from ..bag.model_config import model_from_config
+from ..exit_codes import DATA, OK
 from ..movements import get_movement, movement_library
 from ..reference import ReferenceTorques, load_reference, read_reference
 from .common import die
@@ -149,7 +150,7 @@ def _recover(src: Path, dst: Path) -> int:
     state = "complete" if res.source_complete else f"damaged: {res.problem}"
     counts = ", ".join(f"{t} {n}" for t, n in res.counts.items())
     print(f"{PROG}: recovered {res.messages} messages ({counts}) from {src} ({state}) into {dst}")
-    return 0
+    return OK
 
 
 def run(args: argparse.Namespace) -> int:
@@ -193,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
                             f"{info.message_count} messages of its complete chunks")
     ref, ref_problem = _reference(args.reference)
     report = analyse(rec, choice, ref, th, ref_problem)
-    code = 1 if report.failures else 0
+    code = DATA if report.failures else OK
     try:
         print_report(report, info)
         sys.stdout.flush()

@@ -11,43 +11,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from ..rosenv import ros_env
+from ..exit_codes import DATA, OK
+from ..processes import BIN, Child, ros_env
 from .common import die
-
-BIN = Path(sys.executable).parent
-
-
-
-
-class Child:
-    """A started executable, its log file, stopped by its own PID only."""
-
-    def __init__(self, name: str, args: list[str], env: dict, logs: Path):
-        self.name = name
-        self.log = logs / f"{name}.log"
-        self._fh = open(self.log, "wb")  # noqa: SIM115 - closed in stop()
-        self.proc = subprocess.Popen([str(BIN / name), *args], env=env, stdout=self._fh,
-                                     stderr=subprocess.STDOUT)
-
-    def stop(self, timeout: float = 15.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self._fh.close()
-        return self.proc.returncode
-
-    def text(self) -> str:
-        return self.log.read_text(errors="replace")
 
 
 def wait_for_listeners(env: dict, topic: str, count: int, timeout: float) -> bool:
@@ -59,10 +30,10 @@ def wait_for_listeners(env: dict, topic: str, count: int, timeout: float) -> boo
         f"while time.monotonic() < end and n.count_subscribers('{topic}') < {count}:\n"
         "    rclpy.spin_once(n, timeout_sec=0.1)\n"
         f"ok = n.count_subscribers('{topic}') >= {count}\n"
-        "n.destroy_node(); rclpy.shutdown(); sys.exit(0 if ok else 1)\n"
+        f"n.destroy_node(); rclpy.shutdown(); sys.exit({OK} if ok else {DATA})\n"
     )
     return subprocess.run([sys.executable, "-c", code], env=env, timeout=timeout + 30,
-                          check=False).returncode == 0
+                          check=False).returncode == OK
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -80,22 +51,22 @@ def main(argv: list[str] | None = None) -> int:
     env = ros_env(args.domain, out / "logs")
     bag = out / "run.mcap"
     ids = [int(x) for x in args.movements.split(",") if x.strip()]
-    pub_args = ["--ros-args", "-p", "loop:=false", "-p", "min_subscribers:=2"]
+    pub_args = ["-p", "loop:=false", "-p", "min_subscribers:=2"]
     if ids:
         pub_args += ["-p", f"movements:={ids}"]
     t0 = time.monotonic()
     print(f"demo: ROS_DOMAIN_ID={args.domain}, loopback only; output in {out}")
-    children = [Child("torque_node", [], env, out / "logs"),
-                Child("bag_recorder", ["--ros-args", "-p", f"output:={bag}"], env, out / "logs")]
+    children = [Child.script("torque_node", [], env, out / "logs"),
+                Child.script("bag_recorder", ["-p", f"output:={bag}"], env, out / "logs")]
     try:
         if not wait_for_listeners(env, "joint_states", 2, timeout=30.0):
             return die("demo: torque_node and bag_recorder did not come up; see " + str(out / "logs"))
         n = len(ids) or 65
         print(f"demo: replaying {n} movements at 1 kHz (~{n * 1.5:.0f} s)...", flush=True)
-        pub = Child("trajectory_publisher", pub_args, env, out / "logs")
-        code = pub.proc.wait(timeout=n * 1.5 * 3 + 60)
+        pub = Child.script("trajectory_publisher", pub_args, env, out / "logs")
+        code = pub.wait(timeout=n * 1.5 * 3 + 60)
         pub.stop()
-        if code != 0:
+        if code != OK:
             return die(f"demo: trajectory_publisher exited {code}; see {pub.log}")
         time.sleep(0.5)  # let the last answers reach the recorder
     finally:
@@ -114,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"demo: no plot ({exc})", file=sys.stderr)
     summary = json.loads(report.read_text()) if report.is_file() else {}
     print(f"\ndemo finished in {time.monotonic() - t0:.0f} s: check_bag exit {check.returncode} "
-          f"({'PASS' if check.returncode == 0 else 'FAIL'})")
+          f"({'PASS' if check.returncode == OK else 'FAIL'})")
     print(f"  bag:    {bag}\n  report: {report}\n  plot:   {plot}\n  logs:   {out / 'logs'}")
     if summary.get("failures"):
         print("  failures: " + "; ".join(summary["failures"][:5]))

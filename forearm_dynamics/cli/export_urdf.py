@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .. import build_model
 from ..builders import MODEL_KINDS
+from ..exit_codes import OK
 from .common import body_size_arg, die, numbers_arg
 
 
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
         return die(f"export_urdf: {exc}")
     if args.output == "-":
         sys.stdout.write(urdf)
-        return 0
+        return OK
     out = Path(args.output)
     try:
         tmp = out.with_name(out.name + ".tmp")
@@ -49,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     payload = f", payload {args.payload_mass:g} kg" if args.payload_mass else ""
     print(f"wrote {out} ({args.model}, {args.side} arm, body size {args.body_size}{payload})",
           file=sys.stderr)
-    return 0
+    return OK
 
 
 if __name__ == "__main__":

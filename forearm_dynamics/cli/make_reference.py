@@ -12,6 +12,7 @@ import numpy as np
 from ..anthropometry import resolve_body_size
 from ..builders import build_tree
 from ..description import load_description
+from ..exit_codes import OK
 from ..movements import default_rate_hz, movement_library
 from ..reference import REFERENCE_FILE, save_reference
 from .common import die
@@ -64,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         return die(f"make_reference: cannot write {args.output}: {exc}")
     print(f"\nwrote {args.output} {torques.shape} in {time.perf_counter() - t0:.1f} s",
           file=sys.stderr)
-    return 0
+    return OK
 
 
 if __name__ == "__main__":

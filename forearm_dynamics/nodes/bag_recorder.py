@@ -13,28 +13,25 @@ torque node. Everything else: reliable, volatile, depth `qos_depth` (1000: a wri
 pause of ~0.5 s at 2 kHz does not drop).
 
 Files: `output` (default forearm_YYYYmmdd_HHMMSS.mcap in the working directory) is
-never overwritten; a missing or unwritable directory is one error line and exit code 2.
-SIGINT/SIGTERM finish the file (summary, statistics; exit 0), also during start-up (an
+never overwritten; a missing or unwritable directory is one error line and exit code 2 (USAGE).
+SIGINT/SIGTERM finish the file (summary, statistics; exit 0, OK), also during start-up (an
 empty, complete bag) and when a second signal arrives while the file is being closed.
 After SIGKILL the file holds every chunk closed before: chunks close at 1 MiB or every
 `flush_period` s (each closed chunk is logged at debug level with the messages it makes
 safe: `--log-level bag_recorder:=debug`). A write failure (disk full) logs one error
-naming the messages kept, stops recording and exits 1; it is not retried. Parameters are
+naming the messages kept, stops recording and exits 1 (DATA); it is not retried. Parameters are
 read at start-up; runtime changes are refused.
 """
 
 from __future__ import annotations
 
 import signal
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
@@ -51,7 +48,8 @@ from ..bag import (
 )
 from ..bag.schemas import message_class, type_name_of
 from ..bag.writer import COMPRESSION
-from .common import CONFIG_TOPIC, latched_qos, make_executor, spin, stream_qos
+from ..exit_codes import DATA, OK
+from .common import CONFIG_TOPIC, latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, Spec, init_node
 
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
@@ -62,8 +60,6 @@ KNOWN_TYPES: dict[str, type] = {
     "diagnostics": DiagnosticArray,
     CONFIG_TOPIC: String,
 }
-EXIT_BAD_PARAMETER = 2
-EXIT_WRITE_FAILED = 1
 
 SPECS = (
     Spec("topics", list(DEFAULT_TOPICS), "topics to record: 'name' (types known for the "
@@ -155,7 +151,7 @@ class BagRecorder(Node):
                 raise ParameterError("topics", f"{plan.name!r} is not a valid topic name ({exc})") from None
         path = Path(output).expanduser() if output else default_output()
         self.done = Future()
-        self.exit_code = 0
+        self.exit_code = OK
         self.executor_kind = "events"
         try:
             self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
@@ -200,7 +196,7 @@ class BagRecorder(Node):
     def _stop(self, exc: BagWriteError) -> None:
         if not self.done.done():
             self.get_logger().error(str(exc))
-            self.exit_code = EXIT_WRITE_FAILED
+            self.exit_code = DATA
             self.done.set_result(True)
 
     def finish(self) -> int:
@@ -215,9 +211,9 @@ class BagRecorder(Node):
         try:
             self.writer.close()
         except BagWriteError as exc:
-            if self.exit_code == 0:
+            if self.exit_code == OK:
                 log.error(str(exc))
-            return EXIT_WRITE_FAILED
+            return DATA
         finally:
             for s, handler in held.items():
                 signal.signal(s, handler)
@@ -227,46 +223,10 @@ class BagRecorder(Node):
         return self.exit_code
 
 
-def run(args: list[str] | None = None) -> int:
-    """Record until SIGINT/SIGTERM (exit 0), a write failure (1) or a bad parameter (2)."""
-    try:
-        rclpy.init(args=args)
-    except _rclpy.RCLError as exc:  # an unreadable --params-file or malformed --ros-args
-        print(f"[ERROR] [bag_recorder]: invalid arguments: {exc}", file=sys.stderr)
-        return EXIT_BAD_PARAMETER
-    node = None
-    try:
-        try:
-            node = BagRecorder()
-        except ParameterError as exc:
-            rclpy.logging.get_logger("bag_recorder").error(str(exc))
-            return EXIT_BAD_PARAMETER
-        except (KeyboardInterrupt, ExternalShutdownException):
-            return 0  # stopped during start-up (a file, if created, was closed complete)
-        except Exception as exc:
-            if not rclpy.ok():  # SIGINT/SIGTERM during start-up: rcl calls fail, a normal stop
-                return 0
-            if not isinstance(exc, _rclpy.RCLError):
-                raise
-            rclpy.logging.get_logger("bag_recorder").error(f"cannot start: {exc}")
-            return EXIT_BAD_PARAMETER
-        try:
-            spin(node, make_executor(node.executor_kind), done=node.done)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
-        return node.finish()
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-
 
 def main() -> None:
-    try:
-        code = run(sys.argv)
-    except KeyboardInterrupt:  # SIGINT before rclpy's handlers exist: nothing was recorded
-        code = 130
-    sys.exit(code)
+    """Record until SIGINT/SIGTERM (exit OK), a write failure (DATA) or a bad parameter (USAGE)."""
+    main_for(BagRecorder, "bag_recorder")
 
 
 if __name__ == "__main__":

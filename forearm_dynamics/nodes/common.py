@@ -8,19 +8,17 @@ from collections.abc import Callable
 from importlib import metadata
 
 import rclpy
+from rclpy.exceptions import NameValidationException
 from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
+from ..exit_codes import OK, USAGE
 from .params import ParameterError
 
 #: Latched topic on which the torque node states its model (kind, body size, joint names).
 CONFIG_TOPIC = "torque_node/config"
-
-#: Exit code of a node that refuses its parameters.
-EXIT_BAD_PARAMETER = 2
 
 EXECUTORS = ("events", "single")
 
@@ -94,39 +92,49 @@ def package_version() -> str:
 
 
 def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
-    """Create the node, spin it, clean up; exit code 0, or 2 for a refused parameter.
+    """Create the node, spin it, clean up: the one main loop of every node.
 
-    SIGINT and SIGTERM (rclpy's signal handlers) shut the context down, which ends spin().
-    The node may set `executor_kind` and `done` (a Future) to steer the spin.
+    Exit codes (exit_codes.py): OK after SIGINT/SIGTERM (rclpy's signal handlers shut the
+    context down, which ends spin()), also during start-up; USAGE for a refused parameter
+    or unusable --ros-args; otherwise what the node says. The node may set
+    `executor_kind` and `done` (a Future) to steer the spin, and define `finish() -> int`
+    (called after the spin, e.g. to close a file) or an `exit_code` attribute.
+
+    rcl failures reach Python as rclpy's RCLError, a RuntimeError: caught by that public
+    base class (the class itself lives in rclpy's private extension module).
     """
     try:
         rclpy.init(args=args)
-    except _rclpy.RCLError as exc:  # an unreadable --params-file or malformed --ros-args
+    except RuntimeError as exc:  # an unreadable --params-file or malformed --ros-args
         print(f"[ERROR] [{name}]: invalid arguments: {exc}", file=sys.stderr)
-        return EXIT_BAD_PARAMETER
+        return USAGE
     node = None
     try:
         try:
             node = make_node()
         except ParameterError as exc:
             rclpy.logging.get_logger(name).error(str(exc))
-            return EXIT_BAD_PARAMETER
+            return USAGE
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return OK  # stopped during start-up (the node left its files complete)
         except Exception as exc:
             if not rclpy.ok():  # SIGINT/SIGTERM during start-up: rcl calls fail, a normal stop
-                return 0
-            if not isinstance(exc, _rclpy.RCLError):
+                return OK
+            if not isinstance(exc, (RuntimeError, NameValidationException)):
                 raise
             rclpy.logging.get_logger(name).error(f"cannot start: {exc}")  # e.g. a remap clash
-            return EXIT_BAD_PARAMETER
+            return USAGE
         executor = make_executor(getattr(node, "executor_kind", "events"))
         # Start-up objects (modules, model, messages) live as long as the process: freeze
         # them so a full garbage collection never walks them while streaming at 1 kHz.
         gc.collect()
         gc.freeze()
-        spin(node, executor, done=getattr(node, "done", None))
-        return getattr(node, "exit_code", 0)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
+        try:
+            spin(node, executor, done=getattr(node, "done", None))
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finish = getattr(node, "finish", None)
+        return finish() if callable(finish) else getattr(node, "exit_code", OK)
     finally:
         if node is not None:
             node.destroy_node()
@@ -135,4 +143,8 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
 
 def main_for(make_node: Callable[[], Node], name: str) -> None:
     """Console-script entry point: run the node and exit with its code."""
-    sys.exit(run(make_node, name, sys.argv))
+    try:
+        code = run(make_node, name, sys.argv)
+    except KeyboardInterrupt:  # SIGINT before rclpy's handlers exist: a stop, nothing done yet
+        code = OK
+    sys.exit(code)

@@ -7,7 +7,8 @@ CPU). With raw subscriptions and raw publishing the node works on the bytes:
 
 - Input: a message's *shape* (frame_id, names, field counts, hence every offset) is
   parsed and checked once against rclpy's own deserialiser, then cached; a message of a
-  known shape costs a length check, one masked integer comparison of its leading bytes
+  known shape costs a length check, one masked integer comparison of its leading bytes,
+  a 4-byte comparison of the effort count
   (padding ignored: serializers leave junk there) and numpy views at fixed offsets.
   Anything the parser does not vouch for (big-endian or XCDR2 encapsulation, a serializer
   with other conventions, a malformed message) goes through
@@ -56,7 +57,9 @@ class Layout:
 
     Padding bytes are not part of a shape: serializers leave whatever was in the buffer
     there (Fast CDR does), so `matches` compares bytes [12:key_end] under `key_mask`
-    (frame_id, name counts and strings, the position and velocity counts) as integers.
+    (frame_id, name counts and strings, the position and velocity counts) as integers,
+    and the effort count (after the velocity values) as bytes: without it, one effort
+    fewer plus 8 trailing bytes would pass for the cached shape.
     """
 
     size: int  # total bytes
@@ -72,10 +75,13 @@ class Layout:
     vel_off: int
     n_eff: int
     eff_off: int
+    eff_count_off: int  # where the effort count (uint32) sits
+    eff_count: bytes  # its 4 bytes
 
     def matches(self, data: bytes) -> bool:
         """Cheap test that `data` has this shape (stamp, array values and padding aside)."""
         return (len(data) == self.size and data[1] == 1 and data[0] == 0
+                and data[self.eff_count_off:self.eff_count_off + 4] == self.eff_count
                 and int.from_bytes(data[12:self.key_end], "little") & self.key_mask == self.key)
 
     def array(self, buf, which: str) -> np.ndarray:
@@ -144,6 +150,7 @@ def parse_layout(data, max_names: int = 1 << 16) -> Layout:
     n_pos, pos_off = c.float64s()
     vel_count_end = c.off + (-(c.off - _PAYLOAD) % 4) + 4
     n_vel, vel_off = c.float64s()
+    eff_count_off = _align(c.off, 4)
     n_eff, eff_off = c.float64s()
     if c.size - c.off > 32:  # serializers may size the buffer generously, not this much
         raise NotMine("unexpected trailing bytes")
@@ -156,7 +163,8 @@ def parse_layout(data, max_names: int = 1 << 16) -> Layout:
                   key=int.from_bytes(data[12:vel_count_end], "little") & mask, key_mask=mask,
                   meaningful=int.from_bytes(c.used, "little"), frame_id=frame_id, names=names,
                   n_pos=n_pos, pos_off=pos_off, n_vel=n_vel, vel_off=vel_off, n_eff=n_eff,
-                  eff_off=eff_off)
+                  eff_off=eff_off, eff_count_off=eff_count_off,
+                  eff_count=bytes(data[eff_count_off:eff_count_off + 4]))
 
 
 def aligned_buffer(size: int) -> np.ndarray:

@@ -20,10 +20,10 @@ class NullEchoNode(JointStreamNode):
     def __init__(self, node_name: str = "null_echo_node"):
         super().__init__(node_name)
 
-    def configure(self, params: Params) -> tuple[str, ...]:
+    def configure(self, params: Params) -> tuple[str, ...]:  # noqa: ARG002 - the hook's signature
         return JOINT_NAMES
 
-    def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool:
+    def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool:  # noqa: ARG002 - as above
         if not velocity_given:
             self.qd.fill(0.0)
         return True

@@ -34,6 +34,7 @@ from std_msgs.msg import String
 
 from ..anthropometry import resolve_body_size
 from ..description import JOINT_NAMES
+from ..exit_codes import OK
 from ..movements import Movement, get_movement, movement_library
 from .common import EXECUTORS, latched_qos, main_for, stream_qos
 from .jointstate_cdr import OutputTemplate
@@ -129,7 +130,7 @@ class TrajectoryPublisher(Node):
         self.params.warn_unknown()
         self.executor_kind = s.executor
         self.done = Future()
-        self.exit_code = 0
+        self.exit_code = OK
 
         self.out = OutputTemplate(JOINT_NAMES, effort=False)  # raw JointState, effort empty
         self._q, self._qd = self.out.q, self.out.qd

@@ -1,6 +1,6 @@
 """Soak benchmark: the pipeline replaying the 65 movements in a loop at 1 kHz for minutes.
 
-    python -m forearm_dynamics.bench.soak [--minutes 10] [--out benchmarks/soak.json]
+    python -m benchmarks.soak [--minutes 10] [--out benchmarks/soak.json]
     make soak [SOAK_MINUTES=10]
 
 Processes: torque_node, bag_recorder (into a temporary bag, deleted unless --keep-bag),
@@ -32,98 +32,27 @@ import argparse
 import itertools
 import json
 import os
-import platform
 import shutil
-import signal
 import struct
-import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ..rosenv import ros_env
+from forearm_dynamics.exit_codes import DATA, OK
+from forearm_dynamics.processes import Child, Sampler, ros_env
 
-BIN = Path(sys.executable).parent
-CLK_TCK = os.sysconf("SC_CLK_TCK")
+from .stats import loadavg, machine_info, percentiles
+
 PROCESSES = ("torque_node", "bag_recorder", "trajectory_publisher")
 TAIL_GRACE_NS = 500_000_000
 
 
-
-
-class Child:
-    """A started executable logging to a file; stopped by its own PID only."""
-
-    def __init__(self, name: str, args: list[str], env: dict[str, str], log_dir: Path):
-        self.name = name
-        self.log = log_dir / f"{name}.log"
-        with self.log.open("wb") as fh:
-            self.proc = subprocess.Popen([str(BIN / name), "--ros-args", *args], env=env,
-                                         stdout=fh, stderr=subprocess.STDOUT,
-                                         stdin=subprocess.DEVNULL)
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def text(self) -> str:
-        return self.log.read_text(errors="replace")
-
-    def wait_for(self, needle: str, timeout: float) -> None:
-        deadline = time.monotonic() + timeout
-        while needle not in self.text():
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"{self.name} did not report {needle!r}:\n{self.text()[-2000:]}")
-            time.sleep(0.05)
-
-    def stop(self, timeout: float = 20.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(10)
-        return self.proc.returncode
-
-
-class Sampler(threading.Thread):
-    """VmRSS (MB) and CPU time (s) of some PIDs, once a second, with the wall time."""
-
-    def __init__(self, pids: dict[str, int], period: float = 1.0):
-        super().__init__(daemon=True)
-        self.pids, self.period = pids, period
-        self.samples: dict[str, list[tuple[float, float, float]]] = {n: [] for n in pids}
-        self.load: list[tuple[float, float]] = []  # 1-min load average: others' work shows here
-        self._halt = threading.Event()
-
-    @staticmethod
-    def read(pid: int) -> tuple[float, float] | None:
-        try:
-            with open(f"/proc/{pid}/status", encoding="ascii") as fh:
-                rss = next(int(line.split()[1]) for line in fh if line.startswith("VmRSS:")) / 1024
-            with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
-                fields = fh.read().rsplit(")", 1)[1].split()
-            return rss, (int(fields[11]) + int(fields[12])) / CLK_TCK
-        except (OSError, StopIteration, ValueError, IndexError):
-            return None
-
-    def run(self) -> None:
-        while not self._halt.wait(self.period):
-            now = time.time()
-            self.load.append((now, os.getloadavg()[0]))
-            for name, pid in self.pids.items():
-                got = self.read(pid)
-                if got is not None:
-                    self.samples[name].append((now, *got))
-
-    def stop(self) -> None:
-        self._halt.set()
-        self.join(5)
+def _started(child: Child, needle: str, timeout: float) -> None:
+    if not child.wait_for(needle, timeout):
+        raise RuntimeError(f"{child.name} did not report {needle!r}:\n{child.text()[-2000:]}")
 
 
 class Monitor:
@@ -134,8 +63,8 @@ class Monitor:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import String
 
-        from ..nodes.common import stream_qos
-        from ..nodes.trajectory_publisher import marker_qos
+        from forearm_dynamics.nodes.common import stream_qos
+        from forearm_dynamics.nodes.trajectory_publisher import marker_qos
 
         self.stamp = {t: np.zeros(capacity, np.int64) for t in ("states", "torques")}
         self.recv = {t: np.zeros(capacity, np.int64) for t in ("states", "torques")}
@@ -179,10 +108,9 @@ class Monitor:
 
 
 def _pct(x: np.ndarray) -> dict[str, float]:
-    if not len(x):
-        return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
-    p50, p99 = np.percentile(x, [50, 99])
-    return {"p50": float(p50), "p99": float(p99), "max": float(x.max())}
+    """p50 / p99 / max (NaN when empty: a minute without samples still has a table row)."""
+    p = percentiles(x)
+    return {k: p.get(k, float("nan")) for k in ("p50", "p99", "max")}
 
 
 def analyse(mon: Monitor, sampler: Sampler, t_first_ns: int, minutes: float) -> dict:
@@ -207,12 +135,11 @@ def analyse(mon: Monitor, sampler: Sampler, t_first_ns: int, minutes: float) -> 
         lo, hi = t_first_ns / 1e9 + 60 * m, t_first_ns / 1e9 + 60 * (m + 1)
         load = [x for t, x in sampler.load if lo <= t < hi]
         row["load_avg_1min"] = float(max(load)) if load else float("nan")
-        for name, samples in sampler.samples.items():
-            inside = [(t, r, c) for t, r, c in samples if lo <= t < hi]
-            if len(inside) >= 2:
-                rss = float(np.median([r for _t, r, _c in inside]))
-                cpu = 100 * (inside[-1][2] - inside[0][2]) / (inside[-1][0] - inside[0][0])
-                row[name] = {"rss_mb": rss, "cpu_pct": cpu}
+        for name, series in sampler.series.items():
+            rss = series.rss_between(lo, hi - 1e-9)
+            cpu = series.cpu_percent(lo, hi - 1e-9)
+            if len(rss) >= 2 and cpu is not None:
+                row[name] = {"rss_mb": float(np.median(rss)) / 1024, "cpu_pct": cpu}
         rows.append(row)
     # samples the publisher announced (per complete movement) that never arrived here
     markers = sorted(mon.markers, key=lambda d: d["t0_ns"])
@@ -303,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
     from rclpy.experimental import EventsExecutor
 
-    from ..bag import open_bag
+    from forearm_dynamics.bag import open_bag
 
     work = Path(tempfile.mkdtemp(prefix="forearm_soak_"))
     os.environ.setdefault("ROS_LOG_DIR", str(work))
@@ -319,17 +246,20 @@ def main(argv: list[str] | None = None) -> int:
     executor.add_node(node)
     result: dict = {}
     try:
-        children["torque_node"] = Child("torque_node", ["-p", "diagnostics_period:=1.0"], env, work)
+        children["torque_node"] = Child.script("torque_node", ["-p", "diagnostics_period:=1.0"],
+                                               env, work)
         if not args.no_record:
-            children["bag_recorder"] = Child("bag_recorder", ["-p", f"output:={bag_path}"], env, work)
-        children["torque_node"].wait_for("config on", 60)
+            children["bag_recorder"] = Child.script("bag_recorder", ["-p", f"output:={bag_path}"],
+                                                    env, work)
+        _started(children["torque_node"], "config on", 60)
         if not args.no_record:
-            children["bag_recorder"].wait_for("recording", 60)
+            _started(children["bag_recorder"], "recording", 60)
         subscribers = 3 if not args.no_record else 2  # torque_node, (recorder), this monitor
-        children["trajectory_publisher"] = Child("trajectory_publisher", [
+        children["trajectory_publisher"] = Child.script("trajectory_publisher", [
             "-p", "loop:=true", "-p", f"start_delay:={args.start_delay}",
             "-p", f"min_subscribers:={subscribers}", "-p", "subscriber_timeout:=60.0"], env, work)
-        sampler = Sampler({**{n: c.pid for n, c in children.items()}, "monitor": os.getpid()})
+        sampler = Sampler({**{n: c.pid for n, c in children.items()}, "monitor": os.getpid()},
+                          period=1.0)
         sampler.start()
         print(f"soak: {args.minutes:g} min of looping replay at 1 kHz, domain {args.domain}, "
               f"logs in {work}", flush=True)
@@ -381,8 +311,7 @@ def main(argv: list[str] | None = None) -> int:
     result["verdicts"] = verdicts(result, args)
     result.update(command=" ".join([Path(sys.argv[0]).name, *(argv or sys.argv[1:])]),
                   minutes=args.minutes, rate_hz=1000.0, domain=args.domain,
-                  machine={"cpu_count": os.cpu_count(), "python": platform.python_version(),
-                           "platform": platform.platform(), "load_avg_end": os.getloadavg()},
+                  machine={**machine_info(), "load_avg_end": loadavg()},
                   finished=time.strftime("%Y-%m-%d %H:%M:%S"))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1), encoding="utf-8")
@@ -390,9 +319,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"written {args.out}")
     if all(v["ok"] for v in result["verdicts"].values()):
         shutil.rmtree(work, ignore_errors=True)
-        return 0
+        return OK
     print(f"logs kept in {work}")
-    return 1
+    return DATA
 
 
 if __name__ == "__main__":

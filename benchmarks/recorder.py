@@ -1,7 +1,7 @@
 """Recorder bench: bag_recorder under N JointState topics at stepped rates, counted in the bag.
 
 bag_recorder (its defaults: reliable, depth 1000, zstd chunks) records `topics` JointState
-topics fed by bench.loadgen. The steps are given per topic (Hz) with a duration each; the
+topics fed by benchmarks.loadgen. The steps are given per topic (Hz) with a duration each; the
 first one is the nominal load (1 kHz x 4 topics) and gives the sustained figure. After the
 recorder has closed the file, the bag is read back with the mcap library: per step, the
 messages written (unique (topic, sequence) pairs), the drops (sent - written), and the
@@ -21,7 +21,9 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from .procs import Child, Sampler, ros_env
+from forearm_dynamics.processes import Child, Sampler, ros_env
+
+from . import module_env
 
 PREFIX = "/bench/rec"
 
@@ -61,10 +63,10 @@ def run(domain: int, work: Path, topics: int = 4,
             raise RuntimeError(f"bag_recorder did not start:\n{rec.text()[-2000:]}")
         with Sampler({"recorder": rec.pid}) as sampler:
             steps_arg = ",".join(f"{r:g}:{d:g}" for r, d in steps)
-            gen = Child.module("loadgen", "forearm_dynamics.bench.loadgen",
+            gen = Child.module("loadgen", "benchmarks.loadgen",
                                ["--prefix", PREFIX, "--topics", str(topics), "--steps", steps_arg,
                                 "--pause", str(pause)],
-                               env, logs)
+                               module_env(env), logs)
             sampler.add("loadgen", gen.pid)
             total = sum(d for _, d in steps) + 3 * len(steps) + 60
             code = gen.wait(total)

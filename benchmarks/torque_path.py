@@ -34,8 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..movements import get_movement
-from .procs import Child, Sampler, ros_env
+from forearm_dynamics.movements import get_movement
+from forearm_dynamics.processes import Child, Sampler, ros_env
+
+from . import module_env
 from .stats import percentiles
 
 NODE_READY = "joint_torques ("  # stream_node logs "<in> -> <out> (depth ..., executor)"
@@ -116,7 +118,7 @@ def run_variant(v: Variant, movements: list[int], domain: int, work: Path,
             rx_args.append("--best-effort")
         if v.also_input:
             rx_args += ["--also", "joint_states"]
-        rx = Child.module("receiver", "forearm_dynamics.bench.receiver", rx_args, env, logs,
+        rx = Child.module("receiver", "benchmarks.receiver", rx_args, module_env(env), logs,
                           cpus=other_cpus)
         children.append(rx)
         subscribers = 1

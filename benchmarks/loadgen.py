@@ -1,6 +1,6 @@
 """Load generator for the recorder bench: N JointState topics at a stepped rate.
 
-    python -m forearm_dynamics.bench.loadgen --prefix /bench/rec --topics 4 \
+    python -m benchmarks.loadgen --prefix /bench/rec --topics 4 \
         --steps 1000:20,2000:5,4000:5 [--stop-below 0.9]
 
 Every message is the pipeline's JointState (20 names, position, velocity, effort: 1 kB of
@@ -27,8 +27,9 @@ from rclpy.duration import Duration
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
-from ..description import JOINT_NAMES
-from ..nodes.common import stream_qos
+from forearm_dynamics.description import JOINT_NAMES
+from forearm_dynamics.exit_codes import DATA, OK
+from forearm_dynamics.nodes.common import stream_qos
 
 
 def template() -> bytearray:
@@ -77,7 +78,7 @@ def run_step(pubs, buf: bytearray, step: int, rate: float, duration: float) -> d
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="bench.loadgen")
+    ap = argparse.ArgumentParser(prog="benchmarks.loadgen")
     ap.add_argument("--prefix", default="/bench/rec")
     ap.add_argument("--topics", type=int, default=4)
     ap.add_argument("--steps", default="1000:20")
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
         while any(p.get_subscription_count() == 0 for p in pubs):
             if time.monotonic() > deadline:
                 print("LOADGEN " + json.dumps({"error": "no subscriber"}), flush=True)
-                return 1
+                return DATA
             time.sleep(0.05)
         time.sleep(args.pause)  # discovery settles both ways
         buf = template()
@@ -109,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(args.pause)
         print("LOADGEN " + json.dumps({"topics": [p.topic_name for p in pubs], "steps": steps}),
               flush=True)
-        return 0
+        return OK
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

@@ -1,6 +1,6 @@
 """Benchmark receiver: receive time and header stamp of every message on one stamped topic.
 
-    python -m forearm_dynamics.bench.receiver --topic joint_torques --out rx.npz \
+    python -m benchmarks.receiver --topic joint_torques --out rx.npz \
         [--diag-prefix torque_node] [--depth 1000] [--best-effort] [--also joint_states]
 
 A raw subscription (the CDR bytes, no deserialisation): the callback reads the stamp at
@@ -28,7 +28,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
-from ..nodes.common import make_executor, spin, stream_qos
+from forearm_dynamics.exit_codes import OK
+from forearm_dynamics.nodes.common import make_executor, spin, stream_qos
 
 
 def _timer(recv: array, stamps: array):
@@ -82,7 +83,7 @@ class Receiver:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="bench.receiver")
+    ap = argparse.ArgumentParser(prog="benchmarks.receiver")
     ap.add_argument("--topic", default="joint_torques")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--diag-prefix", default="")
@@ -100,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     print(f"receiver: {len(rx.recv_ns)} messages", flush=True)
-    return 0
+    return OK
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ import subprocess
 import time
 from pathlib import Path
 
-from .procs import BIN
+from forearm_dynamics.processes import BIN
 
 
 def reproduce_paper(work: Path, env: dict[str, str], timeout: float = 600.0) -> dict:

@@ -7,7 +7,8 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from .. import build_model, movement_library
+from forearm_dynamics import build_model, movement_library
+
 from .stats import percentiles
 
 

@@ -1,9 +1,11 @@
 """`make bench`: every performance figure of the package, measured on this machine in one run.
 
-    python -m forearm_dynamics.bench [--out benchmarks/results.json] [--quick]
-                                     [--sections compute,torque,choices,recorder,offline]
+    python -m benchmarks [--out benchmarks/results.json] [--quick]
+                         [--sections compute,torque,choices,recorder,offline]
 
-Prints a table and writes a JSON file. Child processes run on loopback DDS only
+Run from the repository root. Prints a table and updates a JSON file: the sections of
+this run replace theirs, every other top-level key (e.g. another benchmark's section) is
+kept (benchmarks/stats.py). Child processes run on loopback DDS only
 (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) in ROS_DOMAIN_ID --domain (default: the
 environment's if set and not 0, else 75); they are stopped by PID. Full run ~7-9 min on
 2 cores; --quick (1 movement, 1 s recorder steps, no reproduce_paper, no choices) ~25 s.
@@ -51,14 +53,14 @@ percentiles over every sample of that run):
   acked, recorder_cpu_percent}, `exit_code`.
 - `offline`: `reproduce_paper` {wall_time_s, exit_code, outputs} (or {skipped}),
   `batch.<model>` {samples, seconds_best, seconds_all, samples_per_s}.
-- `goals.<name>` {target, value, met}: the issue's targets, evaluated on this run's numbers
-  (a report, not a test).
+- `goals.<name>` {target, value, met}: the issue's targets, evaluated on the numbers in
+  the file (a report, not a test).
+- `sections.<key>` {command, started}: the run that wrote each section.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import sys
@@ -66,11 +68,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..movements import movement_library
-from ..paths import config_file
+from forearm_dynamics.exit_codes import OK
+from forearm_dynamics.movements import movement_library
+from forearm_dynamics.paths import config_file
+from forearm_dynamics.processes import ros_env
+
 from . import compute, offline, recorder
-from .procs import ros_env
-from .stats import machine_info
+from .stats import loadavg, machine_info, merge_results, write_json
 from .torque_path import Variant, run_variant
 
 SECTIONS = ("compute", "torque", "choices", "recorder", "offline")
@@ -292,15 +296,9 @@ def table(res: dict) -> str:
     return "\n".join(lines)
 
 
-def _loadavg() -> list[float] | None:
-    try:
-        return [float(x) for x in Path("/proc/loadavg").read_text().split()[:3]]
-    except OSError:
-        return None
-
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m forearm_dynamics.bench",
+    ap = argparse.ArgumentParser(prog="python -m benchmarks",
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results.json"))
     ap.add_argument("--quick", action="store_true", help="tiny mode (tests): ~25 s")
@@ -318,10 +316,10 @@ def main(argv: list[str] | None = None) -> int:
     t_start = time.perf_counter()
     res: dict = {
         "schema": 1, "mode": "quick" if args.quick else "full",
-        "command": " ".join([Path(sys.executable).name, "-m", "forearm_dynamics.bench",
+        "command": " ".join([Path(sys.executable).name, "-m", "benchmarks",
                              *(argv if argv is not None else sys.argv[1:])]),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "domain_id": args.domain,
-        "machine": {**machine_info(), "loadavg_start": _loadavg()}, "versions": _versions(),
+        "machine": {**machine_info(), "loadavg_start": loadavg()}, "versions": _versions(),
     }
     work = Path(tempfile.mkdtemp(prefix="forearm_bench_"))
     try:
@@ -355,15 +353,17 @@ def main(argv: list[str] | None = None) -> int:
             _say(f"logs kept in {work}")
         else:
             shutil.rmtree(work, ignore_errors=True)
-    res["machine"]["loadavg_end"] = _loadavg()
-    res["goals"] = goals(res)
+    res["machine"]["loadavg_end"] = loadavg()
     res["wall_time_s"] = time.perf_counter() - t_start
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(res, indent=1, default=float) + "\n")
+    written = [k for k in ("compute", "torque_path", "choices", "recorder", "offline") if k in res]
+    merged = merge_results(args.out, res, {"command": res["command"], "started": res["started"]},
+                           [*written, "goals"])
+    merged["goals"] = goals(merged)  # on every section in the file, this run's or kept
+    write_json(args.out, merged)
     print(table(res))
-    print(f"\n{args.out} written; {res['wall_time_s']:.0f} s")
-    return 0
-
+    print(f"\n{args.out} written ({', '.join(written)}; other sections kept); "
+          f"{res['wall_time_s']:.0f} s")
+    return OK
 
 if __name__ == "__main__":
     sys.exit(main())

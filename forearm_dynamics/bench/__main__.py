@@ -1,7 +1,0 @@
-"""python -m forearm_dynamics.bench: see run.py (what is measured, results.json keys)."""
-
-import sys
-
-from .run import main
-
-sys.exit(main())

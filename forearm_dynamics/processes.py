@@ -1,0 +1,307 @@
+"""Child processes: a loopback-only ROS environment, start, log, wait, stop by PID, /proc samples.
+
+The one process toolkit of the repository: the demo, the benchmarks (benchmarks/) and the
+tests (test/rosproc.py) start every node through `Child`.
+
+- `ros_env`: every child gets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and the caller's own
+  ROS_DOMAIN_ID (never 0, everyone's default); ROS/RMW/Fast DDS variables of the caller are
+  not inherited, only what the caller passes explicitly (e.g. a Fast DDS profile).
+- `Child`: output goes to files (a chatty child never blocks on a full pipe); it is stopped
+  by its own PID only: SIGINT, then SIGKILL if it hangs. Never by name.
+- `Sampler`: CPU time and memory of some PIDs from /proc, the machine's busy time and load
+  average, in a thread; what the benchmarks report next to their figures.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Self
+
+#: The venv's (or colcon install's) console scripts sit next to its python.
+BIN = Path(sys.executable).parent
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+_NOT_INHERITED = ("ROS_", "RMW_", "FASTRTPS", "FASTDDS", "LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP")
+
+
+def ros_env(domain: int, log_dir: Path | str, extra: dict[str, str] | None = None) -> dict[str, str]:
+    """Environment of a child node: loopback DDS in `domain`, wheel bootstrap not inherited."""
+    if not 0 < domain < 233:
+        raise ValueError(f"ROS_DOMAIN_ID must be 1..232 (0 is everyone's default), got {domain}")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(_NOT_INHERITED)}
+    env.update(
+        ROS_DOMAIN_ID=str(domain),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        ROS_LOG_DIR=str(log_dir),
+        HOME=os.environ.get("HOME") or tempfile.gettempdir(),
+        PYTHONUNBUFFERED="1",
+        RCUTILS_COLORIZED_OUTPUT="0",
+    )
+    env.update(extra or {})
+    return env
+
+
+def _new_file(directory: Path, stem: str, suffix: str) -> Path:
+    """directory/stem.suffix, or stem-2.suffix, ... : never another child's log."""
+    for i in range(1, 10_000):
+        path = directory / (f"{stem}{suffix}" if i == 1 else f"{stem}-{i}{suffix}")
+        try:
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(f"no free log name for {stem} in {directory}")
+
+
+class Child:
+    """One started process, its output in `log` (stdout and stderr, or `log` and `err_log`).
+
+    `cpus`: CPU affinity of the process and every thread it starts (None: any).
+    `split_stderr`: stderr to its own file `err_log` (tests read the two apart).
+    """
+
+    def __init__(self, name: str, argv: list[str], env: dict[str, str], log_dir: Path,
+                 cpus: set[int] | None = None, split_stderr: bool = False):
+        self.name = name
+        self.argv = list(argv)
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.log = _new_file(log_dir, name, ".log")
+        self.err_log = self.log.with_suffix(".err") if split_stderr else None
+        with self.log.open("wb") as out:
+            if self.err_log is None:
+                self.proc = subprocess.Popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,
+                                             stdin=subprocess.DEVNULL)
+            else:
+                with self.err_log.open("wb") as err:
+                    self.proc = subprocess.Popen(argv, env=env, stdout=out, stderr=err,
+                                                 stdin=subprocess.DEVNULL)
+        if cpus:
+            # Popen returns once exec succeeded: the child has one thread, and every thread
+            # it starts later (rclpy, Fast DDS) inherits this affinity.
+            os.sched_setaffinity(self.proc.pid, cpus)
+
+    @classmethod
+    def script(cls, name: str, ros_args: list[str], env: dict[str, str], log_dir: Path,
+               label: str | None = None, cpus: set[int] | None = None,
+               split_stderr: bool = False) -> Child:
+        """A console script of this venv with `--ros-args *ros_args` (if any)."""
+        argv = [str(BIN / name)] + (["--ros-args", *ros_args] if ros_args else [])
+        return cls(label or name, argv, env, log_dir, cpus, split_stderr)
+
+    @classmethod
+    def module(cls, name: str, module: str, args: list[str], env: dict[str, str],
+               log_dir: Path, cpus: set[int] | None = None) -> Child:
+        """`python -m module *args` with this interpreter."""
+        return cls(name, [sys.executable, "-m", module, *args], env, log_dir, cpus)
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    @property
+    def returncode(self) -> int | None:
+        return self.proc.poll()
+
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def stdout(self) -> str:
+        """stdout (and stderr unless split) so far."""
+        try:
+            return self.log.read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def stderr(self) -> str:
+        """stderr so far ('' unless split: it is in stdout())."""
+        if self.err_log is None:
+            return ""
+        try:
+            return self.err_log.read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def text(self) -> str:
+        """Everything the process printed so far."""
+        return self.stdout() + self.stderr()
+
+    def wait_for(self, text: str, timeout: float) -> bool:
+        """True once `text` is in the output; False on timeout or exit without it."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.text():
+                return True
+            if not self.running():
+                return text in self.text()
+            time.sleep(0.05)
+        return False
+
+    def wait(self, timeout: float) -> int | None:
+        """The exit code, or None if it still runs after `timeout` s."""
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0, strict: bool = False) -> int:
+        """Signal this process only; SIGKILL if it has not exited after `timeout` s.
+
+        The exit code (-9 after a SIGKILL); with `strict`, a hang raises TimeoutExpired
+        once the process is killed (a node that ignores SIGINT is a bug a test must see).
+        """
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=10)
+                if strict:
+                    raise
+        return self.proc.returncode
+
+
+# -- /proc sampling ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ProcStat:
+    """One reading of a live process."""
+
+    cpu_s: float  # utime + stime
+    rss_kb: int  # VmRSS
+    hwm_kb: int  # VmHWM (peak RSS)
+
+
+def proc_stat(pid: int) -> ProcStat | None:
+    """CPU seconds and memory of a live process from /proc; None once it is gone.
+
+    An exited child not yet reaped (a zombie) has no memory lines: None too, not zeros.
+    """
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+        cpu = (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime, stime (fields 14, 15)
+        rss = hwm = None
+        with open(f"/proc/{pid}/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    rss = int(line.split()[1])
+                elif line.startswith("VmHWM:"):
+                    hwm = int(line.split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+    if rss is None or hwm is None:
+        return None
+    return ProcStat(cpu, rss, hwm)
+
+
+def machine_busy() -> float | None:
+    """CPU seconds the whole machine spent busy (all cores, /proc/stat: not idle, not iowait)."""
+    try:
+        with open("/proc/stat", encoding="ascii") as fh:
+            fields = [int(x) for x in fh.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)
+    return (sum(fields[:8]) - idle) / CLOCK_TICKS
+
+
+@dataclass
+class Samples:
+    """Time series of one process: wall time (time.time(), s), CPU s, RSS kB, HWM kB."""
+
+    t: list[float] = field(default_factory=list)
+    cpu: list[float] = field(default_factory=list)
+    rss: list[int] = field(default_factory=list)
+    hwm: list[int] = field(default_factory=list)
+
+    def cpu_percent(self, t0: float, t1: float) -> float | None:
+        """CPU use in % of one core between wall times t0 and t1 (nearest samples inside)."""
+        idx = [i for i, t in enumerate(self.t) if t0 <= t <= t1]
+        if len(idx) < 2:
+            return None
+        a, b = idx[0], idx[-1]
+        span = self.t[b] - self.t[a]
+        return 100.0 * (self.cpu[b] - self.cpu[a]) / span if span > 0 else None
+
+    def rss_between(self, t0: float, t1: float) -> list[int]:
+        return [r for t, r in zip(self.t, self.rss, strict=True) if t0 <= t <= t1]
+
+    def peak_hwm_kb(self) -> int | None:
+        return max(self.hwm) if self.hwm else None
+
+
+class Sampler:
+    """Reads /proc of some processes every `period` s in a thread.
+
+    `series[name]`: that process's Samples; `machine`: the whole machine's busy CPU time
+    (cpu only), so the CPU used by processes other than ours can be reported
+    (`foreign_cpu_percent`); `load`: (wall time, 1-min load average) pairs.
+    Use as a context manager, or start()/stop().
+    """
+
+    def __init__(self, pids: dict[str, int], period: float = 0.25):
+        self.pids = dict(pids)
+        self.period = period
+        self.series = {name: Samples() for name in pids}
+        self.machine = Samples()
+        self.load: list[tuple[float, float]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="proc-sampler", daemon=True)
+
+    def add(self, name: str, pid: int) -> None:
+        self.series.setdefault(name, Samples())
+        self.pids[name] = pid
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+
+    def __enter__(self) -> Self:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.sample()
+            self._stop.wait(self.period)
+
+    def foreign_cpu_percent(self, t0: float, t1: float) -> float | None:
+        """% of one core used between t0 and t1 by every process but the sampled ones."""
+        total = self.machine.cpu_percent(t0, t1)
+        ours = [s.cpu_percent(t0, t1) for s in self.series.values()]
+        if total is None or any(x is None for x in ours):
+            return None
+        return max(total - sum(ours), 0.0)
+
+    def sample(self) -> None:
+        now = time.time()
+        self.load.append((now, os.getloadavg()[0]))
+        busy = machine_busy()
+        if busy is not None:
+            self.machine.t.append(now)
+            self.machine.cpu.append(busy)
+            self.machine.rss.append(0)
+            self.machine.hwm.append(0)
+        for name, pid in list(self.pids.items()):
+            st = proc_stat(pid)
+            if st is None:
+                continue
+            s = self.series[name]
+            s.t.append(time.time())
+            s.cpu.append(st.cpu_s)
+            s.rss.append(st.rss_kb)
+            s.hwm.append(st.hwm_kb)

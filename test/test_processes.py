@@ -1,0 +1,95 @@
+"""The process toolkit (forearm_dynamics/processes.py) on plain Python children: the ROS
+environment it hands out, logs that never collide, waiting, and stopping by PID only
+(SIGINT, then SIGKILL for a child that ignores it)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from forearm_dynamics.processes import Child, Sampler, proc_stat, ros_env
+
+#: Prints "ready", then sleeps; with "stubborn" it ignores SIGINT.
+SLEEPER = (
+    "import signal, sys, time\n"
+    "if 'stubborn' in sys.argv: signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+    "print('ready', flush=True); print('to stderr', file=sys.stderr, flush=True)\n"
+    "time.sleep(60)\n"
+)
+
+
+def sleeper(tmp_path, *args: str, split: bool = False) -> Child:
+    return Child("sleeper", [sys.executable, "-c", SLEEPER, *args], ros_env(42, tmp_path), tmp_path,
+                 split_stderr=split)
+
+
+def test_ros_env_is_loopback_in_its_own_domain(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("ROS_DOMAIN_ID", "0")
+    monkeypatch.setenv("RMW_IMPLEMENTATION", "rmw_cyclonedds_cpp")
+    monkeypatch.setenv("FASTRTPS_DEFAULT_PROFILES_FILE", "/elsewhere.xml")
+    env = ros_env(42, tmp_path, {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"})
+    assert env["ROS_DOMAIN_ID"] == "42" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert env["ROS_LOG_DIR"] == str(tmp_path) and env["PATH"] == os.environ["PATH"]
+    assert "RMW_IMPLEMENTATION" not in env and "FASTRTPS_DEFAULT_PROFILES_FILE" not in env
+    assert env["FASTDDS_BUILTIN_TRANSPORTS"] == "UDPv4"  # only what the caller passes
+    for bad in (0, 233, -1):
+        with pytest.raises(ValueError, match="1..232"):
+            ros_env(bad, tmp_path)
+
+
+def test_start_wait_for_and_stop(tmp_path) -> None:
+    a, b = sleeper(tmp_path), sleeper(tmp_path, split=True)
+    try:
+        assert a.log != b.log and a.log.name == "sleeper.log" and b.log.name == "sleeper-2.log"
+        assert a.wait_for("ready", 30) and b.wait_for("to stderr", 30)
+        assert "to stderr" in a.stdout() and a.stderr() == ""  # together unless split
+        assert "to stderr" not in b.stdout() and b.stderr().strip() == "to stderr"
+        assert a.running() and a.wait(0.1) is None and not a.wait_for("never printed", 0.3)
+        assert proc_stat(a.pid) is not None and proc_stat(a.pid).rss_kb > 0
+    finally:
+        assert a.stop() == -signal.SIGINT or a.returncode == 1  # KeyboardInterrupt in sleep
+        b.stop()
+    assert not a.running() and proc_stat(a.pid) is None
+    assert a.stop() == a.returncode  # stopping twice is harmless
+
+
+def test_stubborn_child_is_killed_and_strict_raises(tmp_path) -> None:
+    c = sleeper(tmp_path, "stubborn")
+    assert c.wait_for("ready", 30)
+    assert c.stop(timeout=0.5) == -signal.SIGKILL
+    d = sleeper(tmp_path, "stubborn")
+    assert d.wait_for("ready", 30)
+    with pytest.raises(subprocess.TimeoutExpired):
+        d.stop(timeout=0.5, strict=True)
+    assert not d.running() and d.returncode == -signal.SIGKILL
+
+
+def test_sampler_reads_cpu_and_memory(tmp_path) -> None:
+    burn = "import time\nt = time.time() + 1.5\nwhile time.time() < t: pass\n"
+    burner = Child("burner", [sys.executable, "-c", burn], ros_env(42, tmp_path), tmp_path)
+    with Sampler({"burner": burner.pid}, period=0.1) as sampler:
+        burner.wait(30)  # exited, not yet reaped: a zombie, which has no memory to sample
+    s = sampler.series["burner"]
+    assert len(s.t) >= 5 and all(r > 0 for r in s.rss)
+    busy = s.cpu_percent(s.t[0], s.t[-1])
+    assert busy is not None and busy > 20  # a busy loop, even on a loaded machine
+    assert s.peak_hwm_kb() >= max(s.rss) and len(sampler.load) >= 5
+
+
+def test_an_exited_unreaped_child_is_not_sampled(tmp_path) -> None:
+    """A zombie keeps its /proc/<pid>/stat but has no memory lines: no sample, not zeros."""
+    quick = Child("quick", [sys.executable, "-c", "pass"], ros_env(42, tmp_path), tmp_path)
+    for _ in range(200):  # poll() would reap it: watch /proc instead
+        with open(f"/proc/{quick.pid}/stat", encoding="ascii") as fh:
+            if fh.read().rsplit(")", 1)[1].split()[0] == "Z":
+                break
+        time.sleep(0.05)
+    else:
+        pytest.fail("the child never exited")
+    assert proc_stat(quick.pid) is None
+    assert quick.wait(10) == 0
