@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..exit_codes import USAGE
 
-def die(message: str, code: int = 2) -> int:
+
+def die(message: str, code: int = USAGE) -> int:
     """One clear line on stderr, no traceback; returns the exit code."""
     print(message, file=sys.stderr)
     return code
