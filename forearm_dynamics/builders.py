@@ -108,8 +108,8 @@ def simplified_forearm(
         com = 0.5 * (frac0 + frac1) * cyl.wrist - origin
         return m, com, cylinder_inertia(m, cyl.radius, (frac1 - frac0) * cyl.length, cyl.axis)
 
-    links = [Link("forearm_proximal", *part(0.0, split, np.zeros(3))),
-             Link("forearm_distal", *part(split, 1.0, joint_origin))]
+    links = [Link("forearm_proximal", *part(0.0, split, np.zeros(3)), "cylinder"),
+             Link("forearm_distal", *part(split, 1.0, joint_origin), "cylinder")]
     joints = [
         Joint("elbow_flexion", "humerus", "forearm_proximal", a.elbow_origin, a.elbow_axis,
               *rng["elbow_flexion"]),
@@ -125,8 +125,8 @@ def anatomical_forearm(
     a = desc.anatomical
     ulna = _scaled(a.ulna, size.forearm, size.mass)
     radius = _scaled(a.radius, size.forearm, size.mass)
-    links = [Link("ulna", ulna.mass, ulna.com, ulna.inertia),
-             Link("radius", radius.mass, radius.com, radius.inertia)]
+    links = [Link("ulna", ulna.mass, ulna.com, ulna.inertia, "bone"),
+             Link("radius", radius.mass, radius.com, radius.inertia, "bone")]
     joints = [
         Joint("elbow_flexion", "humerus", "ulna", a.elbow_origin, a.elbow_axis,
               *desc.ranges["elbow_flexion"]),
@@ -167,7 +167,7 @@ def build_tree(
         raise ValueError(f"unknown model kind {kind!r}; expected one of {MODEL_KINDS}")
     h_links, h_joints = hand_subtree(desc, size, parent, wrist)
     hum = desc.anatomical.humerus
-    root = Link("humerus", hum.mass * size.mass, hum.com, hum.inertia * size.mass)
+    root = Link("humerus", hum.mass * size.mass, hum.com, hum.inertia * size.mass, "bone")
     links = [links[0], links[1], *h_links]
     return KinematicTree(kind, size, desc.gravity.copy(), root, tuple(links), tuple(joints + h_joints))
 
