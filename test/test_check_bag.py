@@ -309,3 +309,17 @@ def test_garbage_payloads_exit_2(tmp_path, reference, capsys) -> None:
     code, text = _check(bag, reference, capsys=capsys)
     assert code == 2
     assert len(text.strip().splitlines()) == 1 and "cannot analyse" in text
+
+
+def test_json_report_keys_are_documented(good_bag, reference, tmp_path, capsys) -> None:
+    """Every key the --json report writes is named in check_bag's help (its docstring)."""
+    import forearm_dynamics.cli.check_bag as cli
+
+    out_json = tmp_path / "report.json"
+    _check(good_bag, reference, "--json", str(out_json), capsys=capsys)
+    report = json.loads(out_json.read_text())
+    doc = cli.__doc__.split("The --json report", 1)[1]
+    words = set(doc.replace(",", " ").replace("{", " ").replace("}", " ").replace("(", " ").split())
+    keys = set(report) | set(report["bag"]) | set(report["model"]) | set(report["delivery"]) \
+        | set(report["machine"]) | set(report["movements"][0]) | set(report["delivery"]["latency_ms"])
+    assert sorted(keys - words) == []

@@ -63,7 +63,9 @@ PROG = "check_bag"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    head, _, rest = __doc__.partition("\n\n")
+    ap = argparse.ArgumentParser(prog=PROG, description=head, epilog=rest.split("\n\n", 1)[1],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("bag", type=Path, help="MCAP file written by bag_recorder (or ros2 bag)")
     ap.add_argument("--json", type=Path, metavar="OUT", help="write the full report as JSON")
     ap.add_argument("--thresholds", type=Path, metavar="YAML",
