@@ -44,6 +44,7 @@ class Run:
     markers: bool = True
     torques: bool = True
     load: tuple[float, ...] = ()  # load_average_1min values put in /diagnostics, one per second
+    late_ms: float = 0.0  # the first movement's last 100 samples sent (and stamped) this late
 
 
 def _config(arm) -> str:
@@ -75,6 +76,10 @@ def write_run(path: Path, run: Run) -> int:
         for mid in run.movements:
             mv = get_movement(mid)
             t = mv.sample_times(1000)
+            if run.late_ms and mid == run.movements[0]:
+                # a late timer tick: the publisher catches up, stamping each sample when sent
+                # and evaluating it at stamp - t0, so the movement outlasts its duration
+                t[-100:] += run.late_ms / 1000
             q, qd, qdd = mv.evaluate(t)
             tau = arm.inverse_dynamics(q, qd, qdd)
             for dof, frac in run.offset.items():
@@ -150,6 +155,19 @@ def test_clean_run_passes(good_bag, reference, tmp_path, capsys) -> None:
     assert d["lost"] == 0 and d["joint_states"] == d["joint_torques"] == 3000
     assert d["latency_ms"]["p50"] == pytest.approx(0.3) and d["latency_ms"]["p99"] == pytest.approx(0.3)
     assert 600 < d["rate_hz"]["joint_states"] < 1000  # 1 kHz with a 0.1 s pause between movements
+
+
+def test_a_late_publisher_keeps_every_sample_in_its_movement(tmp_path, reference, capsys) -> None:
+    """Samples stamped past t0 + duration (but before the next marker) are still counted."""
+    bag = tmp_path / "late.mcap"
+    write_run(bag, Run(late_ms=80.0))
+    out_json = tmp_path / "late.json"
+    code, text = _check(bag, reference, "--json", str(out_json), capsys=capsys)
+    assert code == 0, text
+    report = json.loads(out_json.read_text())
+    assert [m["samples"] for m in report["movements"]] == [1500, 1500]
+    assert all(m["shortfall"] is None for m in report["movements"]) and " ! " not in text
+    assert report["movements"][0]["state_error_rad"] == 0.0  # evaluated at stamp - t0
 
 
 def test_injected_torque_error_fails_naming_the_dof(tmp_path, reference, capsys) -> None:

@@ -89,7 +89,7 @@ class MovementResult:
     name: str
     elbow: str
     t0_ns: int
-    window_ns: int  # duration (or up to the next marker): samples have t0 <= stamp < t0 + window
+    window_ns: int  # up to the next marker (the last: its duration or the bag's end, the later)
     samples: int
     expected: int  # announced by the marker, else duration x the stream's median stamp rate
     pipeline_nrmse: np.ndarray  # (J,) NaN where left out
@@ -223,11 +223,18 @@ def _movement_ptp(arm, mv, cache: dict[int, np.ndarray]) -> np.ndarray:
 
 
 def _pipeline(arm, marker: Marker, next_t0: int | None, torques: JointSeries, floor: float,
-              index: int, ptp_cache: dict[int, np.ndarray] | None = None) -> MovementResult:
+              index: int, ptp_cache: dict[int, np.ndarray] | None = None,
+              end_ns: int = 0) -> MovementResult:
+    """Samples t0 <= stamp < next marker belong to this movement. Not t0 + duration: the
+    publisher stamps each sample when it sends it, so after a late timer tick (a loaded
+    machine) its catch-up samples carry later stamps and a movement spans a little more than
+    its duration; they are still this movement's, evaluated at stamp - t0 (the state check
+    verifies that)."""
     mv = get_movement(marker.id)
-    window = round(mv.duration * 1e9)
     if next_t0 is not None:  # back-to-back movements: a sample belongs to one only
-        window = min(window, next_t0 - marker.t0_ns)
+        window = next_t0 - marker.t0_ns
+    else:
+        window = max(round(mv.duration * 1e9), end_ns - marker.t0_ns + 1)
     sel = _window(torques, marker.t0_ns, window)
     if marker.samples is not None:
         expected = marker.samples
@@ -368,15 +375,16 @@ def analyse(rec: Recording, choice: ModelChoice, ref: ReferenceTorques | None, t
     torques = rec.joint_torques
     results = []
     ptp_cache: dict[int, np.ndarray] = {}
+    series = [x for x in (rec.joint_states, torques) if x is not None and len(x)]
+    last_stamp = max((int(x.stamp_ns.max()) for x in series), default=0)
     for k, marker in enumerate(rec.markers):
         next_t0 = rec.markers[k + 1].t0_ns if k + 1 < len(rec.markers) else None
         try:
-            results.append(_pipeline(arm, marker, next_t0, torques, floor, k, ptp_cache))
+            results.append(_pipeline(arm, marker, next_t0, torques, floor, k, ptp_cache,
+                                     last_stamp))
         except ValueError as exc:
             warnings.append(f"movement marker {marker.id} ignored: {exc}")
-    ends = [int(x.log_ns.max()) for x in (rec.joint_states, torques) if x is not None and len(x)]
-    ends += [int(x.stamp_ns.max()) for x in (rec.joint_states, torques) if x is not None and len(x)]
-    end_ns = max(ends) if ends else 0
+    end_ns = max([last_stamp] + [int(x.log_ns.max()) for x in series])
     for res in results:
         if res.samples == 0:
             warnings.append(f"movement {res.id} at index {res.index}: no joint_torques in its window")
