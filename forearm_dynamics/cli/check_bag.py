@@ -189,7 +189,7 @@ def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, ou
     th = th or Thresholds()
     names = report.joint_names
     p = lambda *a: print(*a, file=out)
-    p(f"{bag_info.path}: {_n(bag_info.message_count)} messages, {len(report.movements)} movements; "
+    p(f"{bag_info.path}: {bag_info.message_count} messages, {len(report.movements)} movements; "
       f"model {report.model.describe()}")
     for w in report.warnings:
         p(f"warning: {w}")
