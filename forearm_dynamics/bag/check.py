@@ -89,7 +89,7 @@ class MovementResult:
     name: str
     elbow: str
     t0_ns: int
-    window_ns: int  # up to the next marker (the last: its duration or the bag's end, the later)
+    window_ns: int  # up to the next marker, at most duration + LATE_MAX_NS
     samples: int
     expected: int  # announced by the marker, else duration x the stream's median stamp rate
     pipeline_nrmse: np.ndarray  # (J,) NaN where left out
@@ -222,19 +222,23 @@ def _movement_ptp(arm, mv, cache: dict[int, np.ndarray]) -> np.ndarray:
     return cache[mv.id]
 
 
+#: How far past its duration a movement's samples may be stamped: the publisher catches up
+#: at most 0.5 s of late samples (trajectory_publisher.MAX_BURST at 1 kHz) and skips the rest.
+LATE_MAX_NS = 500_000_000
+
+
 def _pipeline(arm, marker: Marker, next_t0: int | None, torques: JointSeries, floor: float,
-              index: int, ptp_cache: dict[int, np.ndarray] | None = None,
-              end_ns: int = 0) -> MovementResult:
-    """Samples t0 <= stamp < next marker belong to this movement. Not t0 + duration: the
-    publisher stamps each sample when it sends it, so after a late timer tick (a loaded
-    machine) its catch-up samples carry later stamps and a movement spans a little more than
-    its duration; they are still this movement's, evaluated at stamp - t0 (the state check
-    verifies that)."""
+              index: int, ptp_cache: dict[int, np.ndarray] | None = None) -> MovementResult:
+    """Samples t0 <= stamp < next marker belong to this movement, up to LATE_MAX_NS past its
+    duration. Not cut at t0 + duration: the publisher stamps each sample when it sends it, so
+    after a late timer tick (a loaded machine) its catch-up samples carry later stamps and a
+    movement spans a little more than its duration; they are still this movement's,
+    evaluated at stamp - t0 (the state check verifies that). The bound keeps a restarted
+    publisher's samples out of the old movement if the new marker was not recorded."""
     mv = get_movement(marker.id)
+    window = round(mv.duration * 1e9) + LATE_MAX_NS
     if next_t0 is not None:  # back-to-back movements: a sample belongs to one only
-        window = next_t0 - marker.t0_ns
-    else:
-        window = max(round(mv.duration * 1e9), end_ns - marker.t0_ns + 1)
+        window = min(window, next_t0 - marker.t0_ns)
     sel = _window(torques, marker.t0_ns, window)
     if marker.samples is not None:
         expected = marker.samples
@@ -380,8 +384,7 @@ def analyse(rec: Recording, choice: ModelChoice, ref: ReferenceTorques | None, t
     for k, marker in enumerate(rec.markers):
         next_t0 = rec.markers[k + 1].t0_ns if k + 1 < len(rec.markers) else None
         try:
-            results.append(_pipeline(arm, marker, next_t0, torques, floor, k, ptp_cache,
-                                     last_stamp))
+            results.append(_pipeline(arm, marker, next_t0, torques, floor, k, ptp_cache))
         except ValueError as exc:
             warnings.append(f"movement marker {marker.id} ignored: {exc}")
     end_ns = max([last_stamp] + [int(x.log_ns.max()) for x in series])
