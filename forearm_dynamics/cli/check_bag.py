@@ -219,8 +219,8 @@ def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, ou
         p(f"  lost {_n(d.lost)} of {_n(d.considered)} joint_states ({_num(d.loss_pct, '.3f')} %) "
           "= without a joint_torques of the same stamp")
         if d.tail_left_out:
-            p(f"  left out: the last {_n(d.tail_left_out)} joint_states, received in the bag's "
-              f"final {d.tail_grace_s:g} s (tail_grace_s): their answers may come after the "
+            p(f"  left out: the last {_n(d.tail_left_out)} joint_states, received in the last "
+              f"{d.tail_grace_s:g} s of the stream (tail_grace_s): their answers may come after the "
               f"recorder stops ({_n(d.tail_answered)} of them were answered in the bag)")
     for line in latency_lines(report, th):
         p(line)
