@@ -174,27 +174,35 @@ def _pipeline(arm, marker: Marker, next_t0: int | None, torques: JointSeries, fl
 
 def _shortfall(res: MovementResult, duration_s: float, states: JointSeries | None,
                torques: JointSeries, end_ns: int) -> str:
-    """Why a movement has fewer joint_torques than expected ("" if it has them all)."""
+    """Why a movement has fewer joint_torques than expected ("" if it has them all).
+
+    Answers missing (joint_states without joint_torques) and inputs missing (fewer
+    joint_states than expected: the recording ends inside the movement, the next marker
+    came before the movement's end, or the publisher sent fewer) are told apart.
+    """
     if res.samples >= res.expected:
         return ""
     why = []
-    full_ns = round(duration_s * 1e9)
-    if res.window_ns < full_ns:
-        why.append(f"the next movement's marker comes {res.window_ns / 1e9:.3f} s after its start "
-                   f"(it lasts {duration_s:.3f} s), so its later samples count for the next one")
-    if end_ns < res.t0_ns + min(res.window_ns, full_ns) - 10_000_000:
-        why.append(f"the recording ends {(end_ns - res.t0_ns) / 1e9:.3f} s into it")
+    n_states = None
     if states is not None and len(states):
         sel = _window(states, res.t0_ns, res.window_ns)
         n_states = int(sel.sum())
         unanswered = int((~np.isin(states.stamp_ns[sel], torques.stamp_ns)).sum())
         if unanswered:
             why.append(f"{unanswered} of its {n_states} joint_states have no joint_torques")
-        if n_states < res.expected and not why:
-            why.append(f"only {n_states} joint_states were recorded in its window: the publisher "
-                       "sent fewer, or the recorder missed them")
-    elif not why:
-        why.append("no joint_states in the bag to tell whether inputs or answers are missing")
+    if n_states is None or n_states < res.expected:
+        full_ns = round(duration_s * 1e9)
+        if end_ns < res.t0_ns + min(res.window_ns, full_ns) - 10_000_000:
+            why.append(f"the recording ends {(end_ns - res.t0_ns) / 1e9:.3f} s into it")
+        elif res.window_ns < full_ns - 10_000_000:
+            why.append(f"the next movement's marker comes {res.window_ns / 1e9:.3f} s after its "
+                       f"start (it lasts {duration_s:.3f} s): its later samples count for the "
+                       "next one")
+        elif n_states is not None:
+            why.append(f"only {n_states} joint_states were recorded in its window: the "
+                       "publisher sent fewer, or the recorder missed them")
+        else:
+            why.append("no joint_states in the bag to tell whether inputs or answers are missing")
     return (f"{res.samples} of {res.expected} expected samples: " + "; ".join(why or [
         "joint_torques carry stamps outside the movement's window"]))
 
