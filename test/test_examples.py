@@ -78,9 +78,13 @@ def test_listener_follows_a_replayed_movement(torque_node):
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     pub = None
     try:
-        # the listener says when it is waiting: then its subscription exists
-        first = listener.stdout.readline()
-        assert first.startswith("waiting for /joint_torques"), first
+        # start the replay once the listener's subscription has matched torque_node's
+        # publisher (it says so every second while waiting), so no sample goes before it
+        first = ""
+        while "(1 publisher(s) matched)" not in first:
+            line = listener.stdout.readline()
+            assert line.startswith("waiting for /joint_torques"), first + line
+            first += line
         pub = start("trajectory_publisher", "-p", "movements:=[3]", "-p", "start_delay:=3.0",
                     "-p", "min_subscribers:=1", "-p", "subscriber_timeout:=30.0")
         assert pub.wait(timeout=90) == 0, pub.output()
