@@ -319,11 +319,8 @@ def analyse(rec: Recording, choice: ModelChoice, ref: ReferenceTorques | None, t
         warnings.append("model error skipped: the reference has percentile body sizes only, "
                         f"the bag's model is {choice.arm.body_size.label}")
     else:
+        # a movement whose model error is skipped says why in its own model_note
         groups = _model_error(results, torques, ref, choice.percentile, names, th)
-        skipped = [r for r in results if r.model_nrmse is None and r.samples]
-        if skipped:
-            warnings.append(f"model error skipped for {len(skipped)} movement(s), e.g. movement "
-                            f"{skipped[0].id}: {skipped[0].model_note}")
     report = CheckReport(choice, names, results, groups,
                          delivery(rec.joint_states, torques, th.tail_grace_s), warnings,
                          load=MachineLoad.measure(rec.load_average))

@@ -196,17 +196,21 @@ def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, ou
     p(f"{'id':>3} {'name':<32} {'elbow':<16} {'samples':>8} {'state err':>9}  "
       f"{'pipeline NRMSE':>14} {'(worst DOF)':<20} {'model NRMSE':>11} (worst DOF)")
     p(f"{'':>3} {'':<32} {'':<16} {'':>8} {'(rad)':>9}  {'(%)':>14} {'':<20} {'(%)':>11}")
-    notes: list[tuple[MovementResult, str]] = []
+    notes: list[tuple[str, MovementResult, str]] = []
     for r in report.movements:
         pv, pd = r.worst(r.pipeline_nrmse, names)
         mv, md = r.worst(r.model_nrmse, names)
         flag = "!" if r.shortfall else " "
         p(f"{r.id:>3} {r.name[:32]:<32} {r.elbow[:16]:<16} {r.samples:>7}{flag} "
           f"{_num(r.state_error, '.1e'):>9}  {_pct(pv, 3):>14} {pd:<20} {_pct(mv):>11} {md}")
-        notes += [(r, note) for note in (r.shortfall, r.model_note and f"model error skipped: "
-                                         f"{r.model_note}") if note]
-    for r, note in notes:
-        p(f"  ! movement {r.id} (index {r.index}): {note}")
+        notes += [("!", r, note) for note in (r.shortfall, r.model_note and f"model error skipped: "
+                                              f"{r.model_note}") if note]
+        if r.model_nrmse is not None and not np.isfinite(r.model_nrmse).any():
+            notes.append(("-", r, (f"model NRMSE '-': no DOF's reference torque moves by "
+                          f"{100 * th.model_rel_floor:g} % of its largest peak-to-peak in this "
+                          "movement (model_rel_floor); nothing to compare")))
+    for mark, r, note in notes:
+        p(f"  {mark} movement {r.id} (index {r.index}): {note}")
     if report.model_groups:
         p("model NRMSE by DOF group, % (RMSE / the DOF's largest reference peak-to-peak; "
           "median / max): " + ", ".join(
