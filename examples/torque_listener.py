@@ -58,9 +58,15 @@ class TorqueListener:
         print(f"{self.count} msgs in the last second, {self.total} in all; stamps: "
               f"{self.out_of_order} out of order, {self.gaps} gaps; age p50 {age[0]:.2f} ms, "
               f"p99 {age[1]:.2f} ms", flush=True)
-        print("  " + ", ".join(f"{n} {t:+.4f}" for n, t in zip(self.last.name, self.last.effort,
-                                                                strict=True)) + " (N·m)", flush=True)
+        self.print_last()
         self.count, self.ages_ms = 0, []
+
+    def print_last(self) -> None:
+        """Every joint's torque in the newest message, in its name order."""
+        if self.last is not None:
+            print("  " + ", ".join(f"{n} {t:+.4f}" for n, t in
+                                   zip(self.last.name, self.last.effort, strict=True)) + " (N·m)",
+                  flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         print(f"received {listener.total} joint_torques; stamps out of order "
-              f"{listener.out_of_order}, gaps {listener.gaps}", flush=True)
+              f"{listener.out_of_order}, gaps {listener.gaps}; the last:", flush=True)
+        listener.print_last()
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()

@@ -95,13 +95,16 @@ def test_listener_follows_a_replayed_movement(torque_node):
         out, _ = listener.communicate(timeout=30)
     out = first + out
     assert listener.returncode == 0, out
-    final = re.search(r"received (\d+) joint_torques; stamps out of order (\d+), gaps (\d+)", out)
+    final = re.search(r"received (\d+) joint_torques; stamps out of order (\d+), gaps (\d+); "
+                      r"the last:\n  .* \(N·m\)\n", out)
     assert final, out
     assert int(final.group(1)) == 1500, out  # every sample of the movement, reliable QoS
     assert int(final.group(2)) == 0, out
+    # once a second while the stream runs (how many seconds depends on the machine's speed)
     reports = re.findall(r"^(\d+) msgs in the last second, (\d+) in all", out, flags=re.MULTILINE)
-    assert reports and int(reports[-1][1]) == 1500, out
-    # the last per-joint line: the movement's final posture, at rest -> its gravity torques
+    assert reports and all(int(a) <= int(b) <= 1500 for a, b in reports), out
+    # the last per-joint line (printed at exit): the movement's final posture, at rest ->
+    # its gravity torques
     values = re.findall(r"^  (.+) \(N·m\)$", out, flags=re.MULTILINE)[-1]
     pairs = [p.split() for p in values.split(", ")]
     assert [n for n, _ in pairs] == list(JOINT_NAMES)

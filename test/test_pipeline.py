@@ -129,7 +129,8 @@ def test_demo_exit_code_is_check_bags(run, one_lost, tmp_path, capsys):
 
 
 def test_demo_plot_keeps_to_its_movement(run):
-    """The plotted window ends at the next marker: no sample of the next movement in it."""
+    """The plotted window holds every sample of its movement and none of the next one's
+    (on a loaded machine a movement's stamps can end before or after t0 + duration)."""
     from forearm_dynamics.bag import open_bag
     from forearm_dynamics.bag.decode import read_recording
     from forearm_dynamics.cli.demo_plot import movement_window

@@ -9,6 +9,7 @@ import numpy as np
 from .. import JOINT_NAMES, build_model, get_movement
 from ..analysis.plots import _pyplot
 from ..bag import open_bag
+from ..bag.check import LATE_MAX_NS
 from ..bag.decode import read_recording
 from ..reference import load_reference
 
@@ -16,13 +17,14 @@ SHOW = ("pro_sup", "elbow_flexion", "wrist_flexion", "index_mcp_flexion")
 
 
 def movement_window(markers: list, index: int, duration_s: float) -> tuple[int, int]:
-    """[t0, end) in stamp ns of the marker at `index`: its duration, cut at the next marker.
+    """[t0, end) in stamp ns of the marker at `index`: the samples check_bag counts for it.
 
-    Back-to-back movements: the next movement's first sample can carry a stamp a hair
-    before t0 + duration; drawn with this movement, it looks like a torque spike at the end.
+    Up to the next marker, at most duration + LATE_MAX_NS: the next movement's first sample
+    can carry a stamp before t0 + duration (drawn with this movement it looks like a torque
+    spike at the end), and a late publisher's catch-up samples of this movement a stamp after.
     """
     t0 = markers[index].t0_ns
-    end = t0 + round(duration_s * 1e9)
+    end = t0 + round(duration_s * 1e9) + LATE_MAX_NS
     if index + 1 < len(markers):
         end = min(end, markers[index + 1].t0_ns)
     return t0, end
