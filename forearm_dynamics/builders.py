@@ -249,8 +249,8 @@ def simplified_forearm(
     # Pro/sup joint origin: the point of the axis nearest the split point.
     joint_origin = p0 + ((split_point - p0) @ axis) * axis
     shift = _mass_shift(cyl, placement.cylinder)
-    links = [Link("forearm_proximal", *_cylinder_part(cyl, shift, 0.0, split, np.zeros(3))),
-             Link("forearm_distal", *_cylinder_part(cyl, shift, split, 1.0, joint_origin))]
+    links = [Link("forearm_proximal", *_cylinder_part(cyl, shift, 0.0, split, np.zeros(3)), "cylinder"),
+             Link("forearm_distal", *_cylinder_part(cyl, shift, split, 1.0, joint_origin), "cylinder")]
     joints = [
         Joint("elbow_flexion", "humerus", "forearm_proximal", a.elbow_origin, a.elbow_axis,
               *rng["elbow_flexion"]),
@@ -266,8 +266,8 @@ def anatomical_forearm(
     a = desc.anatomical
     ulna = _scaled(a.ulna, size.forearm, size.mass)
     radius = _scaled(a.radius, size.forearm, size.mass)
-    links = [Link("ulna", ulna.mass, ulna.com, ulna.inertia),
-             Link("radius", radius.mass, radius.com, radius.inertia)]
+    links = [Link("ulna", ulna.mass, ulna.com, ulna.inertia, "bone"),
+             Link("radius", radius.mass, radius.com, radius.inertia, "bone")]
     joints = [
         Joint("elbow_flexion", "humerus", "ulna", a.elbow_origin, a.elbow_axis,
               *desc.ranges["elbow_flexion"]),
@@ -309,7 +309,7 @@ def build_tree(
         links, joints, parent, wrist = simplified_forearm(desc, size, pl)
     h_links, h_joints = hand_subtree(desc, size, parent, wrist)
     hum = desc.anatomical.humerus
-    root = Link("humerus", hum.mass * size.mass, hum.com, hum.inertia * size.mass)
+    root = Link("humerus", hum.mass * size.mass, hum.com, hum.inertia * size.mass, "bone")
     links = [links[0], links[1], *h_links]
     tree = KinematicTree(kind, size, desc.gravity.copy(), root, tuple(links), tuple(joints + h_joints))
     return personalise(tree, side, payload)

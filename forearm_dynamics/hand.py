@@ -37,7 +37,7 @@ def hand_subtree(
 
     def segment(name, m, seg_length, radius, direction):
         com = 0.5 * seg_length * direction
-        links.append(Link(name, m, com, cylinder_inertia(m, radius, seg_length, direction)))
+        links.append(Link(name, m, com, cylinder_inertia(m, radius, seg_length, direction), "cylinder"))
 
     # Wrist: flexion (about +x), then deviation (about -z, ulnar positive).
     joint("wrist_flexion", parent, "wrist_row", wrist_origin, X)
@@ -46,7 +46,8 @@ def hand_subtree(
     # Carpus + metacarpals 2-5: one rectangular prism, COM at its centre.
     m_carpus = mass["carpus"]["carpus"] + sum(mass["metacarpal"][f] for f in FINGERS)
     prism_com = np.array([0.0, -0.5 * palm, 0.0])
-    links.append(Link("carpus", m_carpus, prism_com, prism_inertia(m_carpus, breadth, palm, thick)))
+    links.append(Link("carpus", m_carpus, prism_com, prism_inertia(m_carpus, breadth, palm, thick),
+                      "prism"))
 
     # Thumb: CMC flexion (about -z: across the palm), CMC palmar abduction, MCP, IP.
     th = h.thumb_angle

@@ -13,15 +13,26 @@ SIDES = ("right", "left")
 #: Reflection in the sagittal plane (z -> -z): the right arm's frames to the left arm's.
 MIRROR = np.diag([1.0, 1.0, -1.0])
 
+#: Link.shape values: which uniform solid the inertia was computed from. A viewer draws
+#: it from the inertia alone (urdf.geometry), so a transformed (e.g. mirrored) link keeps
+#: a drawing that matches its inertia.
+SHAPES = ("cylinder", "prism", "bone")
+
 
 @dataclass(frozen=True)
 class Link:
-    """A rigid body; frame parallel to the world at q = 0. Massless links have mass 0."""
+    """A rigid body; frame parallel to the world at q = 0. Massless links have mass 0.
+
+    shape: "cylinder" (forearm pieces, thumb metacarpal, phalanges), "prism" (the palm),
+    "bone" (an anatomical body: no simple solid, drawn as its inertia-equivalent box), or
+    "" (unknown: drawn like "bone").
+    """
 
     name: str
     mass: float
     com: np.ndarray  # (3,) in the link frame
     inertia: np.ndarray  # (3, 3) about the COM, link frame
+    shape: str = ""
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,11 @@ def test_export_urdf_writes_a_loadable_model(tmp_path):
     assert sorted(names) == sorted(ref.joint_names)
     lim = model.upperPositionLimit[model.joints[model.getJointId("elbow_flexion")].idx_q]
     assert lim == np.deg2rad(130)
+    # visible: one visual and one collision shape per body with mass (humerus included)
+    _, collision, visual = pin.buildModelsFromUrdf(
+        str(out), geometry_types=[pin.GeometryType.COLLISION, pin.GeometryType.VISUAL])
+    bodies = sum(1 for link in (ref.tree.root, *ref.tree.links) if link.mass > 0)
+    assert visual.ngeoms == collision.ngeoms == bodies == 19  # humerus, 2 forearm pieces, palm, 15 digits
 
 
 def test_export_urdf_refuses_bad_input(tmp_path):

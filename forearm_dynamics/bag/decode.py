@@ -11,6 +11,7 @@ import json
 from dataclasses import dataclass, field
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -21,6 +22,8 @@ JOINT_STATES = "joint_states"
 JOINT_TORQUES = "joint_torques"
 MOVEMENT = "movement"
 CONFIG = "torque_node/config"
+DIAGNOSTICS = "/diagnostics"
+LOAD_KEY = "load_average_1min"  # put in /diagnostics by the torque node
 
 
 @dataclass
@@ -59,6 +62,7 @@ class Recording:
     joint_torques: JointSeries | None
     markers: list[Marker]
     warnings: list[str] = field(default_factory=list)
+    load_average: list[float] = field(default_factory=list)  # from /diagnostics, if recorded
 
 
 class _Collector:
@@ -131,6 +135,10 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
     """Read joint_states (stamps, position, velocity), joint_torques (stamps, effort), markers."""
     info = bag.info
     chans = {key: info.find_topic(key) for key in (JOINT_STATES, JOINT_TORQUES, MOVEMENT)}
+    diag = next((c for c in info.channels.values() if c.topic == DIAGNOSTICS), None)
+    if diag is not None:
+        chans[DIAGNOSTICS] = diag
+    load: list[float] = []
     ids = {c.id: key for key, c in chans.items() if c is not None}
     states = _Collector(joint_names, ("position", "velocity"))
     torques = _Collector(joint_names, ("effort",))
@@ -148,6 +156,8 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
                 markers.append(_marker(text))
             except (ValueError, KeyError, TypeError) as exc:
                 warnings.append(f"unreadable {key} message ignored ({exc}): {text[:80]!r}")
+        elif key == DIAGNOSTICS:
+            load += _load_average(msg.data)
     if torques.incomplete["effort"]:
         warnings.append(f"{torques.incomplete['effort']} joint_torques messages without one effort "
                         "per name")
@@ -157,4 +167,22 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
         joint_torques=torques.series() if chans[JOINT_TORQUES] is not None else None,
         markers=sorted(unique.values(), key=lambda m: m.t0_ns),
         warnings=warnings,
+        load_average=load,
     )
+
+
+def _load_average(data: bytes) -> list[float]:
+    """The torque node's load_average_1min values in one DiagnosticArray (none if absent)."""
+    try:
+        msg = deserialize_message(data, DiagnosticArray)
+    except Exception:  # noqa: BLE001 - a damaged diagnostics message only loses the load figure
+        return []
+    out = []
+    for status in msg.status:
+        for kv in status.values:
+            if kv.key == LOAD_KEY:
+                try:
+                    out.append(float(kv.value))
+                except ValueError:
+                    pass
+    return out

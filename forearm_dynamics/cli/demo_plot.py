@@ -9,21 +9,36 @@ import numpy as np
 from .. import JOINT_NAMES, build_model, get_movement
 from ..analysis.plots import _pyplot
 from ..bag import open_bag
+from ..bag.check import LATE_MAX_NS
 from ..bag.decode import read_recording
 from ..reference import load_reference
 
 SHOW = ("pro_sup", "elbow_flexion", "wrist_flexion", "index_mcp_flexion")
 
 
+def movement_window(markers: list, index: int, duration_s: float) -> tuple[int, int]:
+    """[t0, end) in stamp ns of the marker at `index`: the samples check_bag counts for it.
+
+    Up to the next marker, at most duration + LATE_MAX_NS: the next movement's first sample
+    can carry a stamp before t0 + duration (drawn with this movement it looks like a torque
+    spike at the end), and a late publisher's catch-up samples of this movement a stamp after.
+    """
+    t0 = markers[index].t0_ns
+    end = t0 + round(duration_s * 1e9) + LATE_MAX_NS
+    if index + 1 < len(markers):
+        end = min(end, markers[index + 1].t0_ns)
+    return t0, end
+
+
 def draw(bag_path: Path, out: Path, movement_id: int = 3) -> None:
     rec = read_recording(open_bag(bag_path), JOINT_NAMES)
-    markers = {m.id: m for m in rec.markers}
-    marker = markers.get(movement_id) or rec.markers[0]
+    index = next((k for k, m in enumerate(rec.markers) if m.id == movement_id), 0)
+    marker = rec.markers[index]
     mv = get_movement(marker.id)
+    t0, end = movement_window(rec.markers, index, mv.duration)
     tq = rec.joint_torques
-    t = (tq.stamp_ns - marker.t0_ns) * 1e-9
-    sel = (t >= 0) & (t < mv.duration)
-    t = t[sel]
+    sel = (tq.stamp_ns >= t0) & (tq.stamp_ns < end)
+    t = (tq.stamp_ns[sel] - t0) * 1e-9
     exact = build_model("segmented").inverse_dynamics(*mv.evaluate(t))
     ref = load_reference()
     ref_t = ref.times[: int(mv.duration * ref.rate_hz)]

@@ -1,4 +1,8 @@
-"""export_urdf: write one model as URDF, for RViz or any other engine."""
+"""export_urdf: write one model as URDF, for RViz, Foxglove or any other engine.
+
+Exactly the model's inertias, joint axes and limits, and a <visual> and <collision> for every
+body (the uniform solid of its own inertia, with a material), so the arm is visible.
+"""
 
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ from .common import body_size_arg, die, numbers_arg
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="export_urdf", description=__doc__)
+    p = argparse.ArgumentParser(prog="export_urdf", description=__doc__.split("\n\n")[0])
     p.add_argument("--model", choices=MODEL_KINDS, default="segmented")
     p.add_argument("--body-size", type=body_size_arg, default=50,
                    help="5, 50 or 95 (men's percentile), male_5 ... female_95, or "

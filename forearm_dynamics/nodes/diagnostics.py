@@ -15,6 +15,7 @@ the first period of a stream (that was a ~10 ms latency spike in every run).
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Iterable
 
@@ -89,6 +90,8 @@ class PipelineStats:
             "rejected_total": str(total_rejected),
             **{f"rejected.{k}": str(v) for k, v in self.rejected.items()},
             **{f"reset.{k}": str(v) for k, v in self.resets.items()},
+            # the machine, not the node: latency on a loaded machine is read against it
+            "load_average_1min": _load_average_1min(),
         }
         if new_rejected:
             level, message = DiagnosticStatus.WARN, f"{new_rejected} sample(s) rejected"
@@ -108,6 +111,13 @@ class PipelineStats:
             hardware_id=hardware_id,
             values=[KeyValue(key=k, value=v) for k, v in values.items()],
         )
+
+
+def _load_average_1min() -> str:
+    try:
+        return f"{os.getloadavg()[0]:.2f}"
+    except OSError:  # not every platform has it
+        return "nan"
 
 
 def diagnostic_array(status: DiagnosticStatus, stamp) -> DiagnosticArray:
