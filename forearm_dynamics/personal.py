@@ -27,7 +27,7 @@ def personalise(tree: KinematicTree, side: str, payload: Payload | None) -> Kine
     if tree.side != "right":
         raise ValueError("personalise starts from the right arm the builders make")
     if payload is not None:
-        body = Link("payload", payload.mass, np.zeros(3), payload.inertia.copy())
+        body = Link("payload", payload.mass, np.zeros(3), payload.inertia.copy(), "object")
         tree = weld(tree, "payload_weld", "carpus", payload.com, body)
         tree = replace(tree, payload=payload)
     return mirror_tree(tree) if check_side(side) == "left" else tree

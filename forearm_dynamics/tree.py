@@ -24,7 +24,8 @@ class Link:
     """A rigid body; frame parallel to the world at q = 0. Massless links have mass 0.
 
     shape: "cylinder" (forearm pieces, thumb metacarpal, phalanges), "prism" (the palm),
-    "bone" (an anatomical body: no simple solid, drawn as its inertia-equivalent box), or
+    "bone" (an anatomical body: no simple solid, drawn as its inertia-equivalent box),
+    "object" (something held in the hand: drawn as a sphere), or
     "" (unknown: drawn like "bone").
     """
 

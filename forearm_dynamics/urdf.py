@@ -24,17 +24,22 @@ MATERIALS = {
     "prism": ("palm", (0.80, 0.60, 0.48, 1.0)),
     "bone": ("bone", (0.90, 0.87, 0.78, 1.0)),
     "": ("bone", (0.90, 0.87, 0.78, 1.0)),
+    "object": ("object", (0.20, 0.45, 0.80, 1.0)),
 }
+
+#: Radius (m) drawn for a point-mass object in the hand: the default grasp's 60 mm object.
+POINT_OBJECT_RADIUS = 0.03
 
 
 @dataclass(frozen=True)
 class Geometry:
     """A URDF primitive in the link frame: centred at `origin`, rotated by `rotation`.
 
-    cylinder: size = (radius, length), its axis is the rotated z; box: size = (x, y, z) edges.
+    cylinder: size = (radius, length), its axis is the rotated z; box: size = (x, y, z) edges;
+    sphere: size = (radius,).
     """
 
-    kind: str  # "cylinder" | "box"
+    kind: str  # "cylinder" | "box" | "sphere"
     size: tuple[float, ...]
     origin: np.ndarray  # (3,)
     rotation: np.ndarray  # (3, 3) proper rotation, columns = the primitive's x, y, z axes
@@ -74,6 +79,12 @@ def geometry(link: Link) -> Geometry | None:
     moments, vectors = np.linalg.eigh(0.5 * (link.inertia + link.inertia.T))
     moments = np.clip(moments, 0.0, None)
     com = np.asarray(link.com, float)
+    if link.shape == "object":
+        # an object in the hand: the sphere of its mean moment (I = 2/5 m r²); a point mass
+        # (no inertia) is drawn at the default grasp object's size
+        mean = float(moments.mean())
+        r = float(np.sqrt(2.5 * mean / link.mass)) if mean > 0.0 else POINT_OBJECT_RADIUS
+        return Geometry("sphere", (r,), com, np.eye(3))
     if link.shape == "cylinder":
         # the axial moment is the one standing apart from the two equal transverse ones
         k = int(np.argmax([abs(moments[i] - moments[[j for j in range(3) if j != i]].mean())
@@ -103,6 +114,8 @@ def _v(x) -> str:
 def _shape_xml(g: Geometry) -> str:
     if g.kind == "cylinder":
         return f'<cylinder radius="{g.size[0]!r}" length="{g.size[1]!r}"/>'
+    if g.kind == "sphere":
+        return f'<sphere radius="{g.size[0]!r}"/>'
     return f'<box size="{_v(g.size)}"/>'
 
 

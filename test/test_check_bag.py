@@ -49,7 +49,7 @@ class Run:
 
 def _config(arm) -> str:
     """The torque node's latched config JSON, made by the torque node's own code."""
-    return json.dumps(model_config(arm, None))
+    return json.dumps(model_config(arm))
 
 
 def write_run(path: Path, run: Run) -> int:

@@ -208,3 +208,33 @@ def test_a_mirrored_link_is_drawn_mirrored():
         np.testing.assert_allclose(left.origin, s @ right.origin, atol=1e-15)
         if left.kind == "cylinder":
             assert abs(left.axis @ (s @ right.axis)) == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("inertia", [None, (2e-3, 1e-3, 2e-3, 0.0, 0.0, 0.0)])
+def test_an_object_in_the_left_hand_is_drawn_where_it_is(inertia, tmp_path):
+    """The payload is a sphere at its COM (the sphere of its mean moment, or the default
+    grasp object's 30 mm for a point mass), welded to the hand; Pinocchio loads it."""
+    model = build_model("segmented", side="left", payload_mass=0.4, payload_inertia=inertia)
+    path = tmp_path / "arm.urdf"
+    path.write_text(model.to_urdf())
+    pmodel, visual = pin.buildModelsFromUrdf(str(path), geometry_types=[pin.GeometryType.VISUAL])
+    names = [pmodel.frames[g.parentFrame].name for g in visual.geometryObjects]
+    assert names.count("payload") == 1
+    k = names.index("payload")
+    sphere = visual.geometryObjects[k].geometry
+    assert type(sphere).__name__ == "Sphere"
+    if inertia is None:
+        assert sphere.radius == pytest.approx(0.03)
+    else:
+        assert sphere.radius == pytest.approx(np.sqrt(2.5 * np.mean(inertia[:3]) / 0.4), rel=1e-12)
+    # at a random posture the sphere's centre is the payload's COM as the model computes it
+    q = np.random.default_rng(5).uniform(pmodel.lowerPositionLimit, pmodel.upperPositionLimit)
+    data = pmodel.createData()
+    gdata = pin.GeometryData(visual)
+    pin.updateGeometryPlacements(pmodel, data, visual, gdata, q)
+    pin.updateFramePlacements(pmodel, data)
+    # payload frame: origin at the payload COM (the weld puts it there), left of the body
+    np.testing.assert_allclose(gdata.oMg[k].translation,
+                               data.oMf[pmodel.getFrameId("payload")].translation, atol=1e-12)
+    hand = data.oMf[pmodel.getFrameId("carpus")].translation
+    assert 0.02 < np.linalg.norm(gdata.oMg[k].translation - hand) < 0.15
