@@ -46,7 +46,8 @@ def tabulated_dimensions(name: str, shown: Any = None) -> dict[str, float]:
     sizes = _table()["sizes"]
     if name not in sizes:
         raise ValueError(
-            f"body_size {name if shown is None else shown!r} is not a tabulated size; use 5, 50, 95 (men), one of "
+            f"body_size {name if shown is None else shown!r} is not a tabulated size; "
+            "use 5, 50, 95 (men), one of "
             f"{', '.join(sizes)}, or a dict of {', '.join(DIMENSIONS)}"
         )
     return dict(sizes[name])

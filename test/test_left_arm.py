@@ -105,7 +105,7 @@ def test_left_urdf_gives_the_same_torques(kind, size, extra):
     assert "left arm" in urdf
     # no rotated, let alone mirrored, link or joint frame (visual/collision shapes are rotated
     # to their principal axes by rpy, which can only express proper rotations)
-    frames = re.findall(r'<(?:inertial|joint)\b.*?</(?:inertial|joint)>', urdf, flags=re.S)
+    frames = re.findall(r'<(?:inertial|joint)\b.*?</(?:inertial|joint)>', urdf, flags=re.DOTALL)
     assert len(frames) > 20
     assert {r for f in frames for r in re.findall(r'rpy="([^"]*)"', f)} == {"0 0 0"}
     parsed = pin.buildModelFromXML(urdf)

@@ -52,7 +52,8 @@ def test_solid_config_states_the_solid_axis() -> None:
 @pytest.mark.parametrize("kw", [
     {"placement": "paper"}, {"placement": "parallel"}, {"cylinder": "mass_matched"},
     {"side": "left"}, {"side": "left", "payload_mass": 0.4},
-    {"payload_mass": 1.2, "payload_com": (0.01, -0.07, -0.04), "payload_inertia": (2e-3, 1e-3, 2e-3, 0, 0, 0)},
+    {"payload_mass": 1.2, "payload_com": (0.01, -0.07, -0.04),
+     "payload_inertia": (2e-3, 1e-3, 2e-3, 0, 0, 0)},
     {"split": 0.4, "axis_offset_distal": (-0.01, 0.002)},
 ])
 @pytest.mark.parametrize("size", [5, "female_95"])

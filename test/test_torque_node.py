@@ -306,7 +306,8 @@ def test_parameters_are_described(tn) -> None:
     tn.peer.node.destroy_client(client)
     d = dict(zip(names, future.result().descriptors, strict=True))
     assert d["qos_depth"].read_only and "Read-only" in d["qos_depth"].description
-    assert (d["qos_depth"].integer_range[0].from_value, d["qos_depth"].integer_range[0].to_value) == (1, 100000)
+    depth_range = d["qos_depth"].integer_range[0]
+    assert (depth_range.from_value, depth_range.to_value) == (1, 100000)
     assert not d["body_size"].read_only and d["body_size"].dynamic_typing
     assert "[kg]" in d["payload_mass"].description and "[m]" in d["stature"].description
     assert not d["payload_mass"].read_only and d["payload_mass"].floating_point_range[0].from_value == 0.0

@@ -84,7 +84,8 @@ def _s(results, name, size="p50", group="pro_sup", metric="nrmse"):
 # -- generated tables (README blocks and tables.md) ------------------------------------------
 
 def headline_table(r: dict) -> str:
-    lines = [("| model | fitted parameters | pro/sup NRMSE mean | median | global | paper's metric, no floor (mean) "
+    lines = [("| model | fitted parameters | pro/sup NRMSE mean | median | global "
+              "| paper's metric, no floor (mean) "
              "| elbow RMSE (N·m) | wrist NRMSE mean |"),
              "|---|---|---|---|---|---|---|---|"]
     for name in HEADLINE:
@@ -108,7 +109,8 @@ def headline_table(r: dict) -> str:
 
 
 def placements_table(r: dict) -> str:
-    lines = [("| placement | split | split rule | axis offset at the elbow (mm, ant, lat) | at the wrist (mm) "
+    lines = [("| placement | split | split rule | axis offset at the elbow (mm, ant, lat) "
+              "| at the wrist (mm) "
               "| axis to the cylinder's | axis to MoBL's pro/sup | fitted parameters |"),
              "|---|---|---|---|---|---|---|---|"]
     for name in ("paper", "parallel", "oblique"):
@@ -129,8 +131,10 @@ def claims_table(r: dict) -> str:
     sizes = [pc(_s(r, ob, size=s)["median"]) for s in ("p5", "p50", "p95")]
     rows = [
         ("The segmented model beats the solid one at pro/sup",
-         (f"Not with the paper's placement: `paper` {pc(m(pa)['mean'])} % mean / {pc(m(pa)['median'])} % median "
-          f"vs solid {pc(m(so)['mean'])} / {pc(m(so)['median'])} %. With equal freedom: parallel axis (2 fitted) "
+         (f"Not with the paper's placement: `paper` {pc(m(pa)['mean'])} % mean / "
+          f"{pc(m(pa)['median'])} % median "
+          f"vs solid {pc(m(so)['mean'])} / {pc(m(so)['median'])} %. "
+          "With equal freedom: parallel axis (2 fitted) "
           f"{pc(m(pl)['mean'])} / {pc(m(pl)['median'])} % vs solid with a fitted parallel axis "
           f"{pc(m('solid_parallel_axis')['mean'])} / {pc(m('solid_parallel_axis')['median'])} %; "
           f"oblique (5) {pc(m(ob)['mean'])} / {pc(m(ob)['median'])} % vs solid with a fitted axis (4) "
@@ -140,7 +144,8 @@ def claims_table(r: dict) -> str:
           "and the split helps only once the axis is off the centreline.")),
         ("Mean errors < 5 % for most DOFs",
          (f"Oblique: wrist {pc(m(ob, group='wrist')['mean'])} %, thumb {pc(m(ob, group='thumb')['mean'])} %, "
-          f"fingers {pc(m(ob, group='fingers')['mean'])} %; solid: wrist {pc(m(so, group='wrist')['mean'])} %, "
+          f"fingers {pc(m(ob, group='fingers')['mean'])} %; "
+          f"solid: wrist {pc(m(so, group='wrist')['mean'])} %, "
           f"thumb {pc(m(so, group='thumb')['mean'])} %, fingers {pc(m(so, group='fingers')['mean'])} %"),
          ("The hand is identical in all models; its errors come from the hand hanging in a slightly "
           "different orientation when the pro/sup axis differs from MoBL's.")),
@@ -256,7 +261,8 @@ def elbow_table(r: dict) -> str:
     lines += ["", (f"Δτ = model − anatomical at rest in the neutral posture. The uniform cylinder's COM is "
                    f"{c['uniform_com_along_mm']:.1f} mm from the elbow along its axis; the ulna + radius "
                    f"composite's is {c['composite_com_along_mm']:.1f} mm along it, "
-                   f"{c['composite_com_anterior_mm']:.1f} mm anterior and {c['composite_com_lateral_mm']:.1f} mm "
+                   f"{c['composite_com_anterior_mm']:.1f} mm anterior and "
+                   f"{c['composite_com_lateral_mm']:.1f} mm "
                    f"lateral of it. Reference elbow peak-to-peak in the {st['n']} still-elbow movements: "
                    f"min {st['min']:.2g}, median {st['median']:.2g}, max {st['max']:.2g} N·m.")]
     return "\n".join(lines)

@@ -107,7 +107,8 @@ def sensitivity(ref, overrides: dict[str, dict], cache: FitCache, length: float,
     desc = load_description()
     rows = []
     for c in cases():
-        spec = {"what": "sensitivity", "version": VERSION, **c, "overrides": overrides, "rate_hz": SENSITIVITY_RATE_HZ}
+        spec = {"what": "sensitivity", "version": VERSION, **c, "overrides": overrides,
+                "rate_hz": SENSITIVITY_RATE_HZ}
 
         def compute(c=c):
             d = _hand(desc, c["hand"], c["k"]) if "hand" in c else desc
@@ -117,7 +118,8 @@ def sensitivity(ref, overrides: dict[str, dict], cache: FitCache, length: float,
         if tick:
             tick()
     perturbed = placement_perturbations(overrides, length)
-    spec = {"what": "placement_sensitivity", "version": VERSION, "perturbed": perturbed, "rate_hz": SENSITIVITY_RATE_HZ}
+    spec = {"what": "placement_sensitivity", "version": VERSION, "perturbed": perturbed,
+            "rate_hz": SENSITIVITY_RATE_HZ}
 
     def compute_placement():
         scorer = _case_scorer(desc, None, ref)

@@ -42,7 +42,8 @@ _DIM_UNITS = {"body_mass": "kg"}
 
 
 def _dimension_bounds() -> dict[str, tuple[float, float]]:
-    return {k: tuple(v) for k, v in yaml.safe_load(config_file("body_sizes.yaml").read_text())["bounds"].items()}
+    bounds = yaml.safe_load(config_file("body_sizes.yaml").read_text())["bounds"]
+    return {k: tuple(v) for k, v in bounds.items()}
 
 
 def _model_specs() -> tuple[Spec, ...]:
