@@ -1,0 +1,272 @@
+"""Kalman filter with a white-jerk (constant-acceleration) model per joint, steady-state gains.
+
+State per joint x = [q, qd, qdd]; between samples dt apart
+    x' = F x + w,  F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]],
+    w = integrated white jerk of spectral density S (kalman_jerk_psd, rad^2/s^5):
+    Q = S [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]].
+Measurement: the position (noise std r), and with velocities given also the velocity
+(noise std r_v), fused as a second measurement row.
+
+Steady-state gains: the gain of the converged filter depends only on (dt, r, r_v, S), the
+same for every joint, so an update is predict (3 vector ops) + innovation + 3 (6 with
+velocities) axpy's on (n,) vectors. Gains come from the discrete algebraic Riccati
+equation (scipy.linalg.solve_discrete_are) and are cached by dt bucket (1 % wide, log
+scale) and noise bucket (12 % wide): a jittered stream reuses a handful of gains, a dropped
+sample (one 2 dt step) gets the gain of its own dt, and nothing is solved per sample once
+the buckets are filled. Start (and after a reset): q = the first sample, qd = 0 (or the
+given velocity), qdd = 0, steady-state gains from the first step: a stream that starts at
+rest has no start-up transient (a time-varying warm-up from a wide prior would put the
+noise of raw differences into the first estimates); one that starts in motion converges
+with the filter's own time constant (about the qdd lag). warm after 3 samples (2 with
+velocities), as the backward difference.
+
+Noise: kalman_noise_deg > 0 fixes the position noise std (degrees); 0 estimates it online:
+per joint an exponentially weighted mean (time constant 2 s) of the squared third
+difference of the raw positions (= 20 r^2 for white noise when the signal is smooth),
+the median over joints every 0.25 s (most joints are still at any time, so motion hardly
+biases it), floored at kalman_noise_floor_deg. Velocity noise likewise from the second
+difference of the given velocities (= 6 r_v^2), or fixed by kalman_velocity_noise_dps.
+
+Lag: the model is exact for constant acceleration, so q and qd have no delay at low
+frequency; under a constant jerk j the acceleration estimate settles at qdd - j d, d the
+lag of qdd, computed by lag() from the steady-state error of the gain in use.
+predict(t) extrapolates the model (constant acceleration) from the last update.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg import solve_discrete_are
+
+from .base import SettingSpec, StateEstimator
+
+_DT_STEP = math.log(1.01)
+_NOISE_STEP = math.log(1.12)
+_CACHE_MAX = 512
+_NOISE_TAU_S = 2.0
+_NOISE_EVERY_S = 0.25
+
+
+def transition(dt: float) -> np.ndarray:
+    return np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+
+
+def process_noise(dt: float, psd: float) -> np.ndarray:
+    d2, d3 = dt * dt, dt * dt * dt
+    return psd * np.array([[d2 * d3 / 20, d2 * d2 / 8, d3 / 6],
+                           [d2 * d2 / 8, d3 / 3, d2 / 2],
+                           [d3 / 6, d2 / 2, dt]])
+
+
+def steady_state(dt: float, psd: float, r: float, r_v: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """(gain K (3, m), prior covariance P) of the converged filter; m = 1 or 2 measurements.
+
+    Solved in units of r (positions / r) so the equation is well scaled for any noise.
+    """
+    f = transition(dt)
+    q = process_noise(dt, psd / (r * r))
+    h = np.array([[1.0, 0.0, 0.0]]) if r_v is None else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    rm = np.eye(1) if r_v is None else np.diag([1.0, (r_v / r) ** 2])
+    p = solve_discrete_are(f.T, h.T, q, rm)
+    k = p @ h.T @ np.linalg.inv(h @ p @ h.T + rm)
+    return k, p * (r * r)
+
+
+class KalmanCA(StateEstimator):
+    """White-jerk Kalman filter per joint with cached steady-state gains; see the module docstring."""
+
+    name = "kalman"
+    settings = (
+        SettingSpec("kalman_jerk_psd", 3e3, "rad^2/s^5",
+                    "white-jerk spectral density of the model (higher: faster, noisier)",
+                    lo=1e-3, hi=1e12),
+        SettingSpec("kalman_noise_deg", 0.0, "deg",
+                    "position noise std; 0 = estimate online", lo=0.0, hi=90.0),
+        SettingSpec("kalman_velocity_noise_dps", 0.0, "deg/s",
+                    "velocity noise std (velocities given); 0 = estimate online", lo=0.0, hi=1e5),
+        SettingSpec("kalman_noise_floor_deg", 0.01, "deg",
+                    "lowest noise the online estimate may believe (and the velocity floor in deg/s)",
+                    lo=1e-6, hi=90.0),
+    )
+
+    def __init__(self, n: int, settings):
+        super().__init__(n, settings)
+        v = self.values
+        self.psd = v["kalman_jerk_psd"]
+        self._floor = math.radians(v["kalman_noise_floor_deg"])
+        self._fixed_r = math.radians(v["kalman_noise_deg"]) or None
+        self._fixed_rv = math.radians(v["kalman_velocity_noise_dps"]) or None
+        self._cache: dict[tuple, tuple[float, ...]] = {}
+        self._r_v_default = self._fixed_rv or math.radians(1.0)  # before any estimate: 1 deg/s
+        self._r_default = self._fixed_r or math.radians(0.5)  # before any estimate: 0.5 deg
+        self._x = (np.zeros(n), np.zeros(n), np.zeros(n))  # the filter state q, qd, qdd
+        self._tmp = np.zeros(n)
+        self._innov = np.zeros(n)
+        self._innov_v = np.zeros(n)
+        # online noise: the last raw samples (newest first) and per-joint mean squares
+        self._hist = [np.zeros(n) for _ in range(3)]
+        self._vhist = [np.zeros(n) for _ in range(2)]
+        self._scratch = np.zeros(n)
+        self._ms = np.zeros(n)
+        self._ms_v = np.zeros(n)
+        self._r, self._r_v = self._r_default, self._r_v_default
+        self._dt = 1e-3
+        self.reset()
+
+    # -- state ----------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the motion; the noise estimates stay (a stamp jump does not change the sensor)."""
+        self._t_ns = None
+        self._count = 0
+        self._qcount = 0
+        self._vcount = 0
+        self._since_noise = 0.0
+
+    def noise(self) -> float | None:
+        return self._r
+
+    def velocity_noise(self) -> float | None:
+        return self._r_v
+
+    def _gain(self, dt: float, vel: bool) -> tuple[float, ...]:
+        r = self._r
+        r_v = self._r_v if vel else None
+        key = (round(math.log(dt) / _DT_STEP), round(math.log(r) / _NOISE_STEP),
+               None if r_v is None else round(math.log(r_v) / _NOISE_STEP))
+        g = self._cache.get(key)
+        if g is None:
+            dtb = math.exp(key[0] * _DT_STEP)
+            rb = math.exp(key[1] * _NOISE_STEP)
+            rvb = None if r_v is None else math.exp(key[2] * _NOISE_STEP)
+            k, _ = steady_state(dtb, self.psd, rb, rvb)
+            g = tuple(float(x) for x in k.T.ravel())  # (k1, k2, k3[, kv1, kv2, kv3])
+            if len(self._cache) >= _CACHE_MAX:
+                self._cache.clear()
+            self._cache[key] = g
+        return g
+
+    # -- update ---------------------------------------------------------------------------
+    def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
+        self.check(t_ns, q, qd)
+        vel = qd is not None
+        a, b, c = self._x
+        if self._t_ns is None:
+            self._t_ns = t_ns
+            np.copyto(a, q)
+            if vel:
+                np.copyto(b, qd)
+            else:
+                b.fill(0.0)
+            c.fill(0.0)
+            self._publish()
+            self._count = 1
+            self._noise_input(q, qd)
+            return False
+        dt = self._dt = (t_ns - self._t_ns) * 1e-9
+        self._t_ns = t_ns
+        self._noise_input(q, qd)
+        if self._online:
+            self._since_noise += dt
+            if self._since_noise >= _NOISE_EVERY_S:
+                self._since_noise = 0.0
+                self._update_noise(vel)
+        # predict
+        tmp = self._tmp
+        np.multiply(c, 0.5 * dt * dt, out=tmp)
+        a += tmp
+        np.multiply(b, dt, out=tmp)
+        a += tmp
+        np.multiply(c, dt, out=tmp)
+        b += tmp
+        g = self._gain(dt, vel)
+        e = self._innov
+        np.subtract(q, a, out=e)
+        if vel:
+            ev = self._innov_v
+            np.subtract(qd, b, out=ev)
+            self._axpy3(g[0], g[2], g[4], e)
+            self._axpy3(g[1], g[3], g[5], ev)
+        else:
+            self._axpy3(g[0], g[1], g[2], e)
+        self._publish()
+        self._count += 1
+        return self._count >= (2 if vel else 3)
+
+    def _publish(self) -> None:
+        """The outputs are copies: predict() may overwrite them, never the state."""
+        np.copyto(self.q, self._x[0])
+        np.copyto(self.qd, self._x[1])
+        np.copyto(self.qdd, self._x[2])
+
+    def _axpy3(self, k1: float, k2: float, k3: float, e: np.ndarray) -> None:
+        tmp = self._tmp
+        for x, k in zip(self._x, (k1, k2, k3), strict=True):
+            np.multiply(e, k, out=tmp)
+            x += tmp
+
+    # -- online noise ---------------------------------------------------------------------
+    @property
+    def _online(self) -> bool:
+        return self._fixed_r is None or self._fixed_rv is None
+
+    def _noise_input(self, q: np.ndarray, qd: np.ndarray | None) -> None:
+        if not self._online:
+            return
+        tmp, scratch = self._tmp, self._scratch
+        if self._fixed_r is None:
+            h = self._hist
+            if self._qcount >= 3:  # third difference q - 3 h0 + 3 h1 - h2 (h0 the newest)
+                np.subtract(q, h[2], out=tmp)
+                np.subtract(h[1], h[0], out=scratch)
+                scratch *= 3.0
+                tmp += scratch
+                tmp *= tmp
+                self._ms_add(self._ms, tmp, self._qcount - 2)
+            h.insert(0, h.pop())  # rotate: the oldest buffer becomes the newest
+            np.copyto(h[0], q)
+            self._qcount += 1
+        if qd is not None and self._fixed_rv is None:
+            vh = self._vhist
+            if self._vcount >= 2:  # second difference qd - 2 v0 + v1
+                np.subtract(qd, vh[0], out=tmp)
+                tmp -= vh[0]
+                tmp += vh[1]
+                tmp *= tmp
+                self._ms_add(self._ms_v, tmp, self._vcount - 1)
+            vh.insert(0, vh.pop())
+            np.copyto(vh[0], qd)
+            self._vcount += 1
+
+    def _ms_add(self, ms: np.ndarray, sq: np.ndarray, k: int) -> None:
+        """Running mean over the first samples, then exponential (time constant _NOISE_TAU_S)."""
+        a = max(1.0 / k, min(1.0, self._dt / _NOISE_TAU_S))
+        sq -= ms
+        sq *= a
+        ms += sq
+
+    def _update_noise(self, vel: bool) -> None:
+        if self._fixed_r is None and self._qcount >= 6:
+            self._r = max(math.sqrt(float(np.median(self._ms)) / 20.0), self._floor)
+        if vel and self._fixed_rv is None and self._vcount >= 5:
+            self._r_v = max(math.sqrt(float(np.median(self._ms_v)) / 6.0), self._floor)
+
+    # -- description ------------------------------------------------------------------------
+    def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
+        """q, qd: 0 (exact for constant acceleration); qdd: steady-state error / jerk."""
+        k, _ = steady_state(dt, self.psd, self._r, self._r_v if velocity_given else None)
+        h = np.array([[1.0, 0.0, 0.0]]) if not velocity_given else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        f = transition(dt)
+        g = np.array([dt**3 / 6, dt**2 / 2, dt])  # true-state increment per unit jerk, on top of F x
+        ikh = np.eye(3) - k @ h
+        # e = est - true after update; e' = (I - K H)(F e - g j)  ->  e = -(I - (I-KH)F)^-1 (I-KH) g j
+        e = -np.linalg.solve(np.eye(3) - ikh @ f, ikh @ g)
+        return {"q": 0.0, "qd": 0.0, "qdd": float(-e[2])}
+
+    def describe(self, dt: float, velocity_given: bool = False) -> dict:
+        out = super().describe(dt, velocity_given)
+        out["noise_online"] = self._fixed_r is None
+        if velocity_given:
+            out["velocity_noise_rad_s"] = self._r_v
+        return out
