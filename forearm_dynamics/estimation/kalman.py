@@ -60,7 +60,13 @@ def process_noise(dt: float, psd: float) -> np.ndarray:
                            [d3 / 6, d2 / 2, dt]])
 
 
-def steady_state(dt: float, psd: float, r: float, r_v: float | None) -> tuple[np.ndarray, np.ndarray]:
+def _unbucket(key: tuple) -> tuple[float, float, float | None]:
+    """(dt, r, r_v) at the centre of a gain-cache bucket."""
+    return (math.exp(key[0] * _DT_STEP), math.exp(key[1] * _NOISE_STEP),
+            None if key[2] is None else math.exp(key[2] * _NOISE_STEP))
+
+
+def steady_state(dt: float, r: float, r_v: float | None, psd: float) -> tuple[np.ndarray, np.ndarray]:
     """(gain K (3, m), prior covariance P) of the converged filter; m = 1 or 2 measurements.
 
     Solved in units of r (positions / r) so the equation is well scaled for any noise.
@@ -137,10 +143,7 @@ class KalmanCA(StateEstimator):
                None if r_v is None else round(math.log(r_v) / _NOISE_STEP))
         g = self._cache.get(key)
         if g is None:
-            dtb = math.exp(key[0] * _DT_STEP)
-            rb = math.exp(key[1] * _NOISE_STEP)
-            rvb = None if r_v is None else math.exp(key[2] * _NOISE_STEP)
-            k, _ = steady_state(dtb, self.psd, rb, rvb)
+            k, _ = steady_state(*_unbucket(key), self.psd)
             g = tuple(float(x) for x in k.T.ravel())  # (k1, k2, k3[, kv1, kv2, kv3])
             if len(self._cache) >= _CACHE_MAX:
                 self._cache.clear()
@@ -186,8 +189,8 @@ class KalmanCA(StateEstimator):
         if vel:
             ev = self._innov_v
             np.subtract(qd, b, out=ev)
-            self._axpy3(g[0], g[2], g[4], e)
-            self._axpy3(g[1], g[3], g[5], ev)
+            self._axpy3(g[0], g[1], g[2], e)  # g = K column by column: position, velocity
+            self._axpy3(g[3], g[4], g[5], ev)
         else:
             self._axpy3(g[0], g[1], g[2], e)
         self._publish()
@@ -255,7 +258,11 @@ class KalmanCA(StateEstimator):
     # -- description ------------------------------------------------------------------------
     def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
         """q, qd: 0 (exact for constant acceleration); qdd: steady-state error / jerk."""
-        k, _ = steady_state(dt, self.psd, self._r, self._r_v if velocity_given else None)
+        r_v = self._r_v if velocity_given else None
+        key = (round(math.log(dt) / _DT_STEP), round(math.log(self._r) / _NOISE_STEP),
+               None if r_v is None else round(math.log(r_v) / _NOISE_STEP))
+        dt, r, r_v = _unbucket(key)  # the gain the filter really uses at this dt
+        k, _ = steady_state(dt, r, r_v, self.psd)
         h = np.array([[1.0, 0.0, 0.0]]) if not velocity_given else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
         f = transition(dt)
         g = np.array([dt**3 / 6, dt**2 / 2, dt])  # true-state increment per unit jerk, on top of F x
