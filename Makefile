@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup test demo lint bench soak reference reproduce clean
+.PHONY: setup test demo lint bench bench-estimation soak reference reproduce clean
 
 setup: $(VENV)/.installed
 
@@ -44,3 +44,8 @@ reference: setup
 
 reproduce: setup
 	$(VENV)/bin/reproduce_paper --out out/paper
+
+# Offline estimator benchmark (no ROS, a few minutes): the `estimation` key of
+# benchmarks/results.json and benchmarks/estimation.png
+bench-estimation: setup
+	$(PY) benchmarks/estimation.py
