@@ -209,7 +209,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=str(HERE / "results.json"))
     ap.add_argument("--figure", default=str(HERE / "estimation.png"))
+    ap.add_argument("--table", action="store_true",
+                    help="print the README tables from --out (no benchmark run)")
     args = ap.parse_args(argv)
+    if args.table:
+        print(tables(json.loads(Path(args.out).read_text(encoding="utf-8"))["estimation"]))
+        return 0
     wall = time.perf_counter()
     info = machine()
     arm = build_model("segmented")
@@ -299,6 +304,42 @@ def targets(rows, extra) -> dict:
     out["cpu_p50_us_1khz"] = cpu
     out["cpu_p50_extra_us_default_vs_backward"] = cpu[d] - cpu["backward"]
     return out
+
+
+def tables(sec: dict) -> str:
+    """Markdown: global torque NRMSE (%) elbow / pro_sup per rate x noise x estimator."""
+    rows, d = sec["rows"], sec["default_estimator"]
+    labels = [d] + [lab for lab in ("baseline", "savgol", "backward", "offline_floor") if lab != d]
+    out = ["| rate | noise | " + " | ".join(labels) + f" | {d} / baseline | {d} lag qdd |",
+           "|---|---|" + "---|" * (len(labels) + 2)]
+    for rate in sec["grid"]["rates_hz"]:
+        for noise in sec["grid"]["noise_deg"]:
+            cells = []
+            for lab in labels:
+                g = _row(rows, lab, rate, noise)["groups"]
+                cells.append(f"{100 * g['elbow']['global']:.1f} / {100 * g['pro_sup']['global']:.1f}")
+            g, b = _row(rows, d, rate, noise)["groups"], _row(rows, "baseline", rate, noise)["groups"]
+            ratio = (f"{g['elbow']['global'] / b['elbow']['global']:.2f} / "
+                     f"{g['pro_sup']['global'] / b['pro_sup']['global']:.2f}")
+            lag = _row(rows, d, rate, noise)["lag_ms"]["qdd"]
+            out.append(f"| {rate:g} Hz | {noise:g} deg | " + " | ".join(cells) + f" | {ratio} | {lag:.0f} ms |")
+    out.append("")
+    out.append("| extra row | estimator | elbow / pro_sup global NRMSE (%) | worst per-movement NRMSE (%) | cpu p50 / p99 (us) |")
+    out.append("|---|---|---|---|---|")
+    for key, title in (("velocities_1khz", "1 kHz, 0.1 deg + velocities 2 deg/s"),
+                       ("jitter_drop_100hz", "100 Hz 0.5 deg, jitter +-25 %, 5 % dropped"),
+                       ("exact_velocity_1khz", "1 kHz exact q, qd (trajectory_publisher)")):
+        for r in sec[key]:
+            g = r["groups"]
+            worst = 100 * max(v["max"] for v in g.values())
+            out.append(f"| {title} | {r['estimator']} | {100 * g['elbow']['global']:.2f} / "
+                       f"{100 * g['pro_sup']['global']:.2f} | {worst:.2f} | "
+                       f"{r['cpu_us']['p50']:.1f} / {r['cpu_us']['p99']:.1f} |")
+    m = sec["machine"]
+    out.append("")
+    out.append(f"Machine: {m['cpu']}, {m['cores']} cores, load average {m['loadavg_start'][0]:.1f} "
+               f"at the start, {m['loadavg_end'][0]:.1f} at the end; {sec['wall_time_s']:.0f} s.")
+    return "\n".join(out)
 
 
 def _line(r) -> str:
