@@ -300,9 +300,12 @@ def targets(rows, extra) -> dict:
     out["grid_points_worse_than_baseline"] = worse
     ex = next(r for r in extra["exact_velocity_1khz"] if r["estimator"] == d)
     out["exact_velocity_max_nrmse"] = ex["max_nrmse_any"]
-    cpu = {r["estimator"]: r["cpu_us"]["p50"] for r in rows if r["rate_hz"] == 1000.0 and r["noise_deg"] == 0.5}
+    cpu = {r["estimator"]: r["cpu_us"]["p50"] for r in rows
+           if r["rate_hz"] == 1000.0 and r["noise_deg"] == 0.5 and "cpu_us" in r}
     out["cpu_p50_us_1khz"] = cpu
     out["cpu_p50_extra_us_default_vs_backward"] = cpu[d] - cpu["backward"]
+    vel = {r["estimator"]: r["cpu_us"]["p50"] for r in extra["velocities_1khz"]}
+    out["cpu_p50_extra_us_default_vs_backward_with_velocities"] = vel[d] - vel["backward"]
     return out
 
 
