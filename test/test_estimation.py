@@ -289,3 +289,15 @@ def test_kalman_lag_matches_a_constant_jerk() -> None:
     e = make_estimator("kalman", 1, FIXED_NOISE)
     _, _, eqdd, _ = feed(e, t, q)
     assert qdd[-1, 0] - eqdd[-1, 0] == pytest.approx(e.lag(dt, False)["qdd"], rel=1e-4)
+
+
+def test_kalman_on_exact_input_believes_its_noise_floor() -> None:
+    """Noiseless positions and velocities at 1 kHz (trajectory_publisher): the online noise
+    estimates settle on the floor (no negative variance, no math error) and qdd is exact."""
+    t = stamps(3000, 1e-3)
+    q, qd, qdd = poly(t, np.repeat(COEF2, 10, axis=1))
+    e = make_estimator("kalman", 20)
+    _, _, eqdd, _ = feed(e, t, q, qd)
+    floor = math.radians(e.values["kalman_noise_floor_deg"])
+    assert e.noise() == pytest.approx(floor) and e.velocity_noise() == pytest.approx(floor)
+    np.testing.assert_allclose(eqdd[-100:], qdd[-100:], rtol=0, atol=1e-6)

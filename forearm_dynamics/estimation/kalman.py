@@ -242,17 +242,17 @@ class KalmanCA(StateEstimator):
 
     def _ms_add(self, ms: np.ndarray, sq: np.ndarray, k: int) -> None:
         """Running mean over the first samples, then exponential (time constant _NOISE_TAU_S)."""
-        a = max(self._stride / k, min(1.0, self._stride * self._dt / _NOISE_TAU_S))
+        a = min(1.0, max(self._stride / k, self._stride * self._dt / _NOISE_TAU_S))
         sq -= ms
         sq *= a
         ms += sq
 
     def _update_noise(self, vel: bool) -> None:
         if self._fixed_r is None and self._qcount >= 7:
-            self._r = max(math.sqrt(float(np.median(self._ms)) / 20.0), self._floor)
+            self._r = max(math.sqrt(max(float(np.median(self._ms)), 0.0) / 20.0), self._floor)
             self._last_gain = None
         if vel and self._fixed_rv is None and self._vcount >= 6:
-            self._r_v = max(math.sqrt(float(np.median(self._ms_v)) / 6.0), self._floor)
+            self._r_v = max(math.sqrt(max(float(np.median(self._ms_v)), 0.0) / 6.0), self._floor)
             self._last_gain = None
 
     # -- description ------------------------------------------------------------------------
