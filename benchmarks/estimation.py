@@ -327,7 +327,7 @@ def tables(sec: dict) -> str:
             lag = _row(rows, d, rate, noise)["lag_ms"]["qdd"]
             out.append(f"| {rate:g} Hz | {noise:g} deg | " + " | ".join(cells) + f" | {ratio} | {lag:.0f} ms |")
     out.append("")
-    out.append("| extra row | estimator | elbow / pro_sup global NRMSE (%) | worst per-movement NRMSE (%) | cpu p50 / p99 (us) |")
+    out.append("| extra row | estimator | elbow / pro_sup global NRMSE (%) | per-movement NRMSE, median / worst (%) | cpu p50 / p99 (us) |")
     out.append("|---|---|---|---|---|")
     for key, title in (("velocities_1khz", "1 kHz, 0.1 deg + velocities 2 deg/s"),
                        ("jitter_drop_100hz", "100 Hz 0.5 deg, jitter +-25 %, 5 % dropped"),
@@ -335,9 +335,14 @@ def tables(sec: dict) -> str:
         for r in sec[key]:
             g = r["groups"]
             worst = 100 * max(v["max"] for v in g.values())
+            median = 100 * max(v["median"] for v in g.values())
             out.append(f"| {title} | {r['estimator']} | {100 * g['elbow']['global']:.2f} / "
-                       f"{100 * g['pro_sup']['global']:.2f} | {worst:.2f} | "
+                       f"{100 * g['pro_sup']['global']:.2f} | {median:.2f} / {worst:.3g} | "
                        f"{r['cpu_us']['p50']:.1f} / {r['cpu_us']['p99']:.1f} |")
+    out.append("")
+    out.append("Median: the largest of the DOF groups' medians. The worst per-movement NRMSE of noisy "
+               "input is meaningless (a DOF whose torque barely changes in a movement divides noise "
+               "by ~0); it is the exact-input figure that the 2 % target is about.")
     m = sec["machine"]
     out.append("")
     out.append(f"Machine: {m['cpu']}, {m['cores']} cores, load average {m['loadavg_start'][0]:.1f} "

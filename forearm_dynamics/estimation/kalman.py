@@ -10,7 +10,7 @@ Measurement: the position (noise std r), and with velocities given also the velo
 Steady-state gains: the gain of the converged filter depends only on (dt, r, r_v, S), the
 same for every joint, so an update is predict (3 vector ops) + innovation + 3 (6 with
 velocities) axpy's on (n,) vectors. Gains come from the discrete algebraic Riccati
-equation (scipy.linalg.solve_discrete_are) and are cached by dt bucket (1 % wide, log
+equation (scipy.linalg.solve_discrete_are) and are cached by dt bucket (4 % wide, log
 scale) and noise bucket (12 % wide): a jittered stream reuses a handful of gains, a dropped
 sample (one 2 dt step) gets the gain of its own dt, and nothing is solved per sample once
 the buckets are filled. Start (and after a reset): q = the first sample, qd = 0 (or the
@@ -51,7 +51,7 @@ from scipy.linalg import solve_discrete_are
 
 from .base import SettingSpec, StateEstimator
 
-_DT_STEP = math.log(1.01)
+_DT_STEP = math.log(1.04)
 _NOISE_STEP = math.log(1.12)
 _CACHE_MAX = 512
 _NOISE_TAU_S = 2.0
@@ -261,8 +261,7 @@ class KalmanCA(StateEstimator):
         r_v = self._r_v if velocity_given else None
         key = (round(math.log(dt) / _DT_STEP), round(math.log(self._r) / _NOISE_STEP),
                None if r_v is None else round(math.log(r_v) / _NOISE_STEP))
-        dt, r, r_v = _unbucket(key)  # the gain the filter really uses at this dt
-        k, _ = steady_state(dt, r, r_v, self.psd)
+        k, _ = steady_state(*_unbucket(key), self.psd)  # the gain the filter uses at this dt
         h = np.array([[1.0, 0.0, 0.0]]) if not velocity_given else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
         f = transition(dt)
         g = np.array([dt**3 / 6, dt**2 / 2, dt])  # true-state increment per unit jerk, on top of F x
