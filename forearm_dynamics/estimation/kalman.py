@@ -8,8 +8,8 @@ Measurement: the position (noise std r), and with velocities given also the velo
 (noise std r_v), fused as a second measurement row.
 
 Steady-state gains: the gain of the converged filter depends only on (dt, r, r_v, S), the
-same for every joint, so an update is predict (3 vector ops) + innovation + 3 (6 with
-velocities) axpy's on (n,) vectors. Gains come from the discrete algebraic Riccati
+same for every joint, so an update is two small matrix products on the stacked state
+X = [q; qd; qdd] (3, n): X = F X (predict), X += K E (correct with the innovations E). Gains come from the discrete algebraic Riccati
 equation (scipy.linalg.solve_discrete_are) and are cached by dt bucket (4 % wide, log
 scale) and noise bucket (12 % wide): a jittered stream reuses a handful of gains, a dropped
 sample (one 2 dt step) gets the gain of its own dt, and nothing is solved per sample once
@@ -36,8 +36,9 @@ predict(t) extrapolates the model (constant acceleration) from the last update.
 Defaults, from benchmarks/estimation.py (65 movements, positions only, 1/4 of them for the
 tuning runs): kalman_jerk_psd = 3e3 was the best or within 3 % of the best of {1e3, 3e3,
 1e4, 3e4} at every rate (30-1000 Hz) and noise (0.1-2 deg); the noise is estimated online
-because a fixed 0.5 deg belief was 2.5 x worse at 2 deg noise (elbow global NRMSE 0.40 vs
-0.16 at 100 Hz) and no better elsewhere. Tried and left out: a constant-jerk (white snap)
+because a fixed 0.5 deg belief (psd 1e4) was 2.5 x worse at 2 deg noise (elbow global NRMSE
+0.40 vs 0.17 at 100 Hz); at 0.1 deg it was 9 % better than online with psd 1e4, but psd 3e3
+online beats both there (0.068). Tried and left out: a constant-jerk (white snap)
 model (worse at every tested point) and per-joint switching to a 10x quieter model while a
 joint's innovations fit it (3 % better, 10 us more per sample).
 """
