@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup test demo lint bench soak reference reproduce clean
+.PHONY: setup test demo lint bench bench-estimation soak reference reproduce clean
 
 setup: $(VENV)/.installed
 
@@ -45,3 +45,8 @@ reference: setup
 
 reproduce: setup
 	$(VENV)/bin/reproduce_paper --out results/paper --readme README.md
+
+# Offline estimator benchmark (no ROS, a few minutes): the `estimation` key of
+# benchmarks/results.json and benchmarks/estimation.png
+bench-estimation: setup
+	$(PY) benchmarks/estimation.py

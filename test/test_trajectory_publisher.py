@@ -96,6 +96,8 @@ def test_loop_repeats_until_signalled(peer) -> None:
     (["rate_hz:=0.0"], "rate_hz"),
     (["body_size:=42"], "body_size"),
     (["loop:=maybe"], "loop"),
+    (["drop_fraction:=0.95"], "drop_fraction"),
+    (["noise_deg:=-1.0"], "noise_deg"),
 ])
 def test_invalid_parameters_exit_2(args: list[str], name: str) -> None:
     ros_args = [x for a in args for x in ("-p", a)]
@@ -119,3 +121,74 @@ def test_waits_for_a_subscriber_then_gives_up(peer) -> None:
         proc.stop(signal.SIGKILL)
     assert "0 of 1 subscribers" in proc.output()
     assert time.monotonic() - t >= 0.5 + get_movement(2).duration
+
+
+SENSOR = ("-p", "noise_deg:=0.5", "-p", "publish_velocity:=false", "-p", "jitter_ms:=1.0",
+          "-p", "drop_fraction:=0.2", "-p", "seed:=7", "-p", "rate_hz:=200.0")
+
+
+def sensor_run(peer) -> tuple[list[JointState], list[dict], np.ndarray]:
+    """Replay movements 1 and 16 as a noisy positions-only 200 Hz sensor; (samples, markers,
+    residuals = published position - analytic position at the stamp)."""
+    samples: list[JointState] = []
+    markers: list[dict] = []
+    subs = [peer.node.create_subscription(JointState, "joint_states", samples.append, stream_qos(1000)),
+            peer.node.create_subscription(String, "movement", lambda m: markers.append(json.loads(m.data)),
+                                          marker_qos())]
+    proc = rosproc.start("trajectory_publisher", "-p", "movements:=[1, 16]", "-p", "start_delay:=0.3",
+                         *SENSOR)
+    try:
+        assert peer.spin_until(lambda: not proc.running(), 30), proc.output()
+        peer.spin_for(0.3)
+    finally:
+        rc = proc.stop(signal.SIGKILL)
+        for sub in subs:  # the next run waits for its own subscriber, not a stale one
+            peer.node.destroy_subscription(sub)
+    assert rc == 0, proc.output()
+    assert [m["id"] for m in markers] == [1, 16], markers
+    stamps = np.array([stamp_ns(s) for s in samples])
+    assert np.all(np.diff(stamps) > 0)
+    t0s = [m["t0_ns"] for m in markers]
+    which = np.searchsorted(t0s, stamps, side="right") - 1
+    res = np.empty((len(samples), len(JOINT_NAMES)))
+    for i, m in enumerate(markers):
+        sel = which == i
+        q, _qd, _qdd = get_movement(m["id"]).evaluate((stamps[sel] - m["t0_ns"]) / 1e9)
+        res[sel] = np.array([s.position for s, w in zip(samples, sel, strict=True) if w]) - q
+    return samples, markers, res
+
+
+def test_noisy_positions_only_sensor_stream(peer) -> None:
+    """noise_deg, publish_velocity, jitter_ms, drop_fraction as specified, and stated in
+    the markers; the truth is movement.evaluate(stamp - t0)."""
+    samples, markers, res = sensor_run(peer)
+    assert all(len(s.velocity) == 0 and len(s.position) == len(JOINT_NAMES) for s in samples)
+    for m in markers:
+        assert m["sensor"] == {"noise_deg": 0.5, "publish_velocity": False, "jitter_ms": 1.0,
+                               "drop_fraction": 0.2, "seed": 7}
+    # noise: N(0, 0.5 deg) on every joint. ~9600 values: the sample std is within 1 % (1 sd)
+    # of the truth, so +-5 % is a 7-sd bound; a mean off by 4 standard errors fails
+    sigma = np.radians(0.5)
+    assert np.std(res) == pytest.approx(sigma, rel=0.05)
+    assert abs(np.mean(res)) < 4 * sigma / np.sqrt(res.size)
+    assert np.abs(res).max() < 6 * sigma  # Gaussian, not something with outliers
+    # drops: the first sample of a movement is kept; the others Binomial(n - 1, 0.2)
+    nominal = sum(m["samples"] for m in markers)
+    dropped = nominal - len(samples)
+    n, p = nominal - len(markers), 0.2
+    assert abs(dropped - n * p) < 5 * np.sqrt(n * p * (1 - p)), (dropped, nominal, n * p)
+    # jitter: +-1 ms uniform adds sqrt(2/3) = 0.82 ms std to the intervals between consecutive
+    # stamps; the timer's own irregularity (load) only adds to it, so a lower bound only
+    steps = np.diff([stamp_ns(s) for s in samples]) / 1e6
+    steps = steps[steps < 7.5]  # consecutive published samples (no drop in between)
+    assert np.std(steps) > 0.6, np.std(steps)
+
+
+def test_sensor_stream_is_reproducible_with_its_seed(peer) -> None:
+    """Same seed, same settings: the same noise and the same dropped samples."""
+    a_samples, _, a = sensor_run(peer)
+    b_samples, _, b = sensor_run(peer)
+    assert len(a_samples) == len(b_samples)
+    # the noise draws are identical; the residuals differ only by the movement evaluated at
+    # slightly different stamps (clock jitter is not ours), far below the noise
+    np.testing.assert_allclose(a, b, atol=np.radians(0.5) * 0.05)

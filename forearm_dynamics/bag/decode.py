@@ -54,6 +54,7 @@ class Marker:
     t0_ns: int
     body_size: object = None
     samples: int | None = None  # as announced by the publisher, if it did
+    sensor: dict | None = None  # simulated sensor: noise_deg, publish_velocity, jitter_ms, ...
 
 
 @dataclass
@@ -112,8 +113,10 @@ def _marker(text: str) -> Marker:
     else:
         t0 = round(float(d["t0"]) * 1e9)
     samples = d.get("samples")
+    sensor = d.get("sensor")
     return Marker(int(d["id"]), str(d.get("name", "")), str(d.get("elbow", "")), t0,
-                  d.get("body_size"), int(samples) if samples is not None else None)
+                  d.get("body_size"), int(samples) if samples is not None else None,
+                  sensor if isinstance(sensor, dict) else None)
 
 
 def read_config(bag: Bag) -> tuple[dict | None, list[str]]:

@@ -12,10 +12,13 @@ from collections.abc import Mapping
 
 from .backward import BackwardDifference
 from .base import SettingSpec, StateEstimator
+from .butterworth import ButterworthDifference
+from .kalman import KalmanCA
+from .savgol import SavitzkyGolay
 
-#: name -> class. The first entry is the default.
+#: name -> class. The first entry is the default (chosen by benchmarks/estimation.py).
 ESTIMATORS: dict[str, type[StateEstimator]] = {
-    BackwardDifference.name: BackwardDifference,
+    cls.name: cls for cls in (KalmanCA, BackwardDifference, ButterworthDifference, SavitzkyGolay)
 }
 
 DEFAULT_ESTIMATOR = next(iter(ESTIMATORS))

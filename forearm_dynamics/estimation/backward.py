@@ -92,6 +92,7 @@ class BackwardDifference(StateEstimator):
         self._t_ns = None
 
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
+        self.check(t_ns, q, qd)
         dt = 0.0 if self._t_ns is None else (t_ns - self._t_ns) * 1e-9
         self._t_ns = t_ns
         np.copyto(self.q, q)

@@ -212,22 +212,23 @@ def verified_layout(data) -> Layout:
 class OutputTemplate:
     """CDR bytes of an output JointState with writable views on its arrays.
 
-    `q`, `qd`, `effort` are float64 views into `buf` (`effort` empty when effort=False);
+    `q`, `qd`, `effort` are float64 views into `buf` (`effort` empty when effort=False,
+    `qd` empty when velocity=False: a positions-only sensor stream);
     `pack_stamp(sec, nsec)` writes the header stamp; `payload()` is what to publish.
     """
 
-    def __init__(self, joint_names, frame_id: str = "", effort: bool = True):
+    def __init__(self, joint_names, frame_id: str = "", effort: bool = True, velocity: bool = True):
         n = len(joint_names)
         msg = JointState()
         msg.header.frame_id = frame_id
         msg.name = list(joint_names)
         # distinct values so the check below proves each view points at its own field
         msg.position = [1.0 + i for i in range(n)]
-        msg.velocity = [-1.0 - i for i in range(n)]
+        msg.velocity = [-1.0 - i for i in range(n)] if velocity else []
         msg.effort = [math.pi * (i + 1) for i in range(n)] if effort else []
         raw = serialize_message(msg)
         self.layout = lay = verified_layout(raw)
-        if (lay.names != tuple(joint_names) or lay.n_pos != n or lay.n_vel != n
+        if (lay.names != tuple(joint_names) or lay.n_pos != n or lay.n_vel != (n if velocity else 0)
                 or lay.n_eff != (n if effort else 0)):
             raise NotMine("output template does not hold the joint names")
         self.frame_id = lay.frame_id

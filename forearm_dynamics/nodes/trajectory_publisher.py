@@ -12,6 +12,17 @@ depth 100): id, name, elbow, body_size, t0 (s) and t0_ns of its first sample. Wi
 `loop`, the node waits until subscribers acknowledged everything (up to `drain` s) and
 exits 0. Parameters: config/trajectory_publisher.yaml; an invalid one -> exit code 2.
 
+Sensor-like input (noise_deg, publish_velocity, jitter_ms, drop_fraction, seed): with the
+defaults the stream is exact as above. Otherwise, per due sample and in this order from
+one numpy Generator seeded with `seed` (the same seed and settings give the same draws):
+the sample is dropped with probability drop_fraction (not published; the next due sample
+is evaluated at its own stamp); the stamp is the clock plus a uniform offset in
+[-jitter_ms, +jitter_ms] (kept 1 us after the previous stamp, and q, qd are evaluated at
+that stamp, so the truth stays movement.evaluate(stamp - t0)); Gaussian noise of std
+noise_deg is added to every position; velocities are left out when publish_velocity is
+false. The settings are in every marker (key "sensor"), so check_bag knows the input was
+noisy and scores the torques against the noiseless truth.
+
 Hot path (every sample; its cost is part of the pipeline's stamp-to-torque latency): the
 minimum-jerk sample is evaluated with Python floats and three numpy calls written straight
 into a preallocated CDR message (jointstate_cdr.OutputTemplate), which is published raw;
@@ -65,6 +76,13 @@ SPECS = (
          "messages", 1, 100000),
     Spec("qos_reliable", True, "reliable (true) or best-effort (false) stream"),
     Spec("executor", "events", "rclpy executor: events or single", choices=EXECUTORS),
+    Spec("noise_deg", 0.0, "std of Gaussian noise added to every position (a simulated sensor); "
+         "0 = exact", "deg", 0.0, 90.0),
+    Spec("publish_velocity", True, "publish velocities (false: positions only, like motion capture)"),
+    Spec("jitter_ms", 0.0, "stamp jitter: uniform in +-jitter_ms around the clock", "ms", 0.0, 1000.0),
+    Spec("drop_fraction", 0.0, "probability that a sample is not published", "", 0.0, 0.9),
+    Spec("seed", 0, "seed of the noise, jitter and drop draws (same seed: same stream)", "", 0,
+         2**62),
 )
 
 
@@ -86,6 +104,22 @@ class ReplaySettings:
     qos_depth: int
     qos_reliable: bool
     executor: str
+    noise_deg: float = 0.0
+    publish_velocity: bool = True
+    jitter_ms: float = 0.0
+    drop_fraction: float = 0.0
+    seed: int = 0
+
+    @property
+    def exact(self) -> bool:
+        """The analytic stream (no sensor simulation)."""
+        return (self.noise_deg == 0.0 and self.publish_velocity and self.jitter_ms == 0.0
+                and self.drop_fraction == 0.0)
+
+    def sensor(self) -> dict:
+        """The sensor settings as stated in each marker."""
+        return {"noise_deg": self.noise_deg, "publish_velocity": self.publish_velocity,
+                "jitter_ms": self.jitter_ms, "drop_fraction": self.drop_fraction, "seed": self.seed}
 
     @classmethod
     def from_params(cls, p: Params) -> ReplaySettings:
@@ -110,6 +144,11 @@ class ReplaySettings:
             qos_depth=p.value("qos_depth"),
             qos_reliable=p.value("qos_reliable"),
             executor=p.value("executor"),
+            noise_deg=p.value("noise_deg"),
+            publish_velocity=p.value("publish_velocity"),
+            jitter_ms=p.value("jitter_ms"),
+            drop_fraction=p.value("drop_fraction"),
+            seed=p.value("seed"),
         )
         p.distinct_topics(("output_topic", "marker_topic"))  # two types on one topic: rcl error
         return settings
@@ -132,8 +171,16 @@ class TrajectoryPublisher(Node):
         self.done = Future()
         self.exit_code = OK
 
-        self.out = OutputTemplate(JOINT_NAMES, effort=False)  # raw JointState, effort empty
-        self._q, self._qd = self.out.q, self.out.qd
+        # raw JointState, effort empty (and velocity too for a positions-only sensor)
+        self.out = OutputTemplate(JOINT_NAMES, effort=False, velocity=s.publish_velocity)
+        self._q = self.out.q
+        self._qd = self.out.qd if s.publish_velocity else np.zeros(len(JOINT_NAMES))
+        self._rng = np.random.default_rng(s.seed)
+        self._noise = np.zeros(len(JOINT_NAMES))
+        self._noise_rad = float(np.radians(s.noise_deg))
+        self._jitter_ns = round(s.jitter_ms * 1e6)
+        self._last_stamp = 0
+        self.dropped = 0
         self.pub = self.create_publisher(
             JointState, s.output_topic, stream_qos(s.qos_depth, s.qos_reliable)
         )
@@ -155,6 +202,7 @@ class TrajectoryPublisher(Node):
         self.get_logger().info(
             f"{len(s.movements)} movement(s), {total:.1f} s at {s.rate_hz:g} Hz on "
             f"{self.pub.topic_name}{' (looping)' if s.loop else ''}"
+            + ("" if s.exact else f"; simulated sensor {s.sensor()}")
         )
 
     def _now_ns(self) -> int:
@@ -224,6 +272,16 @@ class TrajectoryPublisher(Node):
 
     def _publish_sample(self) -> None:
         t_ns = self.get_clock().now().nanoseconds
+        s = self.settings
+        if not s.exact:
+            if self._k and s.drop_fraction and self._rng.random() < s.drop_fraction:
+                self._k += 1  # the first sample (the marker's t0) is never dropped
+                self.dropped += 1
+                return
+            if self._jitter_ns and self._k:
+                t_ns += int(self._rng.integers(-self._jitter_ns, self._jitter_ns, endpoint=True))
+            t_ns = max(t_ns, self._last_stamp + 1000)
+        self._last_stamp = t_ns
         if self._k == 0:
             self._t0_ns = t_ns
             self._publish_marker(t_ns)
@@ -237,6 +295,10 @@ class TrajectoryPublisher(Node):
         q = np.multiply(delta, s, out=self._q)
         q += start
         np.multiply(delta, ds / transition, out=self._qd)
+        if self._noise_rad:
+            self._rng.standard_normal(out=self._noise)
+            self._noise *= self._noise_rad
+            q += self._noise
         out = self.out
         out.pack_stamp(*divmod(t_ns, 1_000_000_000))
         self.pub.publish(out.payload())
@@ -256,6 +318,7 @@ class TrajectoryPublisher(Node):
             "samples": self._n,
             "rate_hz": self.settings.rate_hz,
             "index": self._index,
+            "sensor": self.settings.sensor(),
         }
         self.marker_pub.publish(String(data=json.dumps(info)))
         self.get_logger().info(f"movement {m.id} ({m.name}, {m.elbow})")
@@ -266,7 +329,7 @@ class TrajectoryPublisher(Node):
         drain = Duration(nanoseconds=round(self.settings.drain * 1e9))
         acked = all(p.wait_for_all_acked(drain) for p in (self.pub, self.marker_pub))
         self.get_logger().info(
-            f"done: {self.sent} samples, {self.skipped} skipped"
+            f"done: {self.sent} samples, {self.skipped} skipped, {self.dropped} dropped"
             + ("" if acked else f"; not all acknowledged within {self.settings.drain:g} s")
         )
         self.done.set_result(True)

@@ -1,0 +1,303 @@
+"""The state estimators on their own (no ROS): exact on the polynomials their model assumes,
+noise reduced by the factor their design predicts, irregular stamps and dropped samples,
+predict(), and refused samples that never enter the state."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from forearm_dynamics.estimation import (
+    DEFAULT_ESTIMATOR,
+    ESTIMATORS,
+    all_settings,
+    make_estimator,
+)
+from forearm_dynamics.estimation.kalman import process_noise, steady_state, transition
+
+FIXED_NOISE = {"kalman_noise_deg": 0.5}  # exactness tests: no online estimate in the way
+
+
+def stamps(n: int, dt: float, jitter: float = 0.0, drop: float = 0.0, seed: int = 0) -> np.ndarray:
+    """(n,) stamps in ns: period dt, uniform jitter +-jitter*dt, a fraction dropped."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt + rng.uniform(-jitter, jitter, n) * dt
+    keep = rng.random(n) >= drop
+    keep[:5] = True
+    t = t[keep]
+    return 1_000_000_000 + np.round(t * 1e9).astype(np.int64)
+
+
+def poly(t_ns: np.ndarray, coef: np.ndarray):
+    """q, qd, qdd of q = sum_k coef[k] t^k per column (coef (K, n)), t in s from the start."""
+    t = (t_ns - t_ns[0]) / 1e9
+    p = [np.polynomial.Polynomial(c) for c in coef.T]
+    return tuple(np.column_stack([f.deriv(d)(t) for f in p]) for d in range(3))
+
+
+def feed(est, t_ns, q, qd=None):
+    return est.run(t_ns, q, qd)
+
+
+COEF2 = np.array([[0.3, -0.2], [1.5, -0.7], [-2.0, 3.0]])  # quadratics, 2 columns
+COEF3 = np.array([[0.3, -0.2], [1.5, -0.7], [-2.0, 3.0], [4.0, -1.0]])
+
+
+# -- exact on the model's polynomials ----------------------------------------------------
+@pytest.mark.parametrize(("jitter", "drop"), [(0.0, 0.0), (0.3, 0.1)])
+def test_kalman_is_exact_on_quadratics(jitter, drop) -> None:
+    """Constant acceleration is the model: after the start transient the error is rounding,
+    with jittered stamps and dropped samples too (the prediction uses the real dt)."""
+    t = stamps(1500, 0.01, jitter, drop)
+    q, qd, qdd = poly(t, COEF2)
+    e = make_estimator("kalman", 2, FIXED_NOISE)
+    eq, eqd, eqdd, warm = feed(e, t, q)
+    tail = slice(-100, None)
+    np.testing.assert_allclose(eq[tail], q[tail], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(eqd[tail], qd[tail], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(eqdd[tail], qdd[tail], rtol=0, atol=1e-7)
+    assert not warm[:2].any() and warm[2:].all()
+
+
+def test_kalman_with_velocities_is_exact_on_quadratics() -> None:
+    t = stamps(3000, 1e-3, 0.3, 0.05)
+    q, qd, qdd = poly(t, COEF2)
+    e = make_estimator("kalman", 2, {**FIXED_NOISE, "kalman_velocity_noise_dps": 1.0})
+    _eq, eqd, eqdd, warm = feed(e, t, q, qd)
+    np.testing.assert_allclose(eqdd[-100:], qdd[-100:], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(eqd[-100:], qd[-100:], rtol=0, atol=1e-9)
+    assert not warm[0] and warm[1:].all()
+
+
+@pytest.mark.parametrize("order", [2, 3])
+@pytest.mark.parametrize(("jitter", "drop"), [(0.0, 0.0), (0.4, 0.2)])
+def test_savgol_is_exact_on_polynomials_of_its_order(order, jitter, drop) -> None:
+    """Least squares on the real stamps: exact as soon as the fit is determined."""
+    t = stamps(300, 0.01, jitter, drop)
+    q, qd, qdd = poly(t, COEF2 if order == 2 else COEF3)
+    e = make_estimator("savgol", 2, {"savgol_order": order, "savgol_window_s": 0.1})
+    eq, eqd, eqdd, warm = feed(e, t, q)
+    ok = warm
+    assert ok[order + 1:].all() and not ok[:order].any()
+    np.testing.assert_allclose(eq[ok], q[ok], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(eqd[ok], qd[ok], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(eqdd[ok], qdd[ok], rtol=0, atol=1e-6)
+
+
+def test_savgol_with_velocities_is_exact() -> None:
+    t = stamps(300, 0.004, 0.3, 0.1)
+    q, qd, qdd = poly(t, COEF2)
+    e = make_estimator("savgol", 2, {"savgol_window_s": 0.05})
+    _eq, eqd, eqdd, warm = feed(e, t, q, qd)
+    np.testing.assert_allclose(eqd[warm], qd[warm], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(eqdd[warm], qdd[warm], rtol=0, atol=1e-6)
+
+
+def test_butterworth_tracks_constants_exactly_and_ramps_with_its_lag() -> None:
+    """A low-pass: exact on a constant (also with jitter: the state is [y, y'], a new dt
+    changes nothing); a ramp comes out delayed by lag()['q'], its velocity exact."""
+    t = stamps(400, 0.01, 0.3, 0.1)
+    c = np.full((len(t), 2), 0.7)
+    e = make_estimator("butterworth", 2)
+    eq, eqd, eqdd, _ = feed(e, t, c)
+    np.testing.assert_allclose(eq, c, rtol=0, atol=1e-12)
+    assert np.abs(eqd).max() < 1e-9 and np.abs(eqdd).max() < 1e-7
+
+    t = stamps(400, 0.01)
+    q, qd, _ = poly(t, COEF2[:2])
+    e = make_estimator("butterworth", 2, {"butterworth_cutoff_hz": 6.0})
+    eq, eqd, eqdd, _ = feed(e, t, q)
+    lag = e.lag(0.01, False)  # q(t - lag) = q(t) - slope * lag
+    np.testing.assert_allclose(eq[-50:], q[-50:] - COEF2[1] * lag["q"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(eqd[-50:], qd[-50:], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(eqdd[-50:], 0.0, atol=1e-6)
+
+
+def test_butterworth_matches_scipy_on_a_uniform_stream() -> None:
+    from scipy.signal import butter, lfilter, lfilter_zi
+
+    x = np.random.default_rng(5).normal(size=(500, 1))
+    b, a = butter(2, 8.0, fs=250.0)
+    ref, _ = lfilter(b, a, x[:, 0], zi=lfilter_zi(b, a) * x[0, 0])
+    e = make_estimator("butterworth", 1, {"butterworth_cutoff_hz": 8.0})
+    eq, *_ = feed(e, stamps(500, 1 / 250), x)
+    np.testing.assert_allclose(eq[:, 0], ref, rtol=0, atol=1e-12)
+
+
+def test_backward_is_exact_for_constant_acceleration_after_warm_up() -> None:
+    t = stamps(100, 0.01, 0.3, 0.1)
+    q, qd, qdd = poly(t, COEF2)
+    e = make_estimator("backward", 2)
+    _, _, eqdd, warm = feed(e, t, q, qd)
+    np.testing.assert_allclose(eqdd[warm], qdd[warm], rtol=0, atol=1e-6)
+
+
+# -- noise reduced as the design predicts --------------------------------------------------
+N_COLS = 4000  # independent noise realisations (columns): sample variance within ~2.2 %
+
+
+def white(n_samples: int, sigma: float, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).normal(0.0, sigma, (n_samples, N_COLS))
+
+
+def test_savgol_noise_gain_is_the_sum_of_squared_coefficients() -> None:
+    dt, sigma = 0.01, 0.01
+    e = make_estimator("savgol", N_COLS, {"savgol_window_s": 0.1})
+    h = e.coefficients(dt)
+    eq, eqd, eqdd, _ = feed(e, stamps(30, dt), white(30, sigma, 1))
+    for est, row in ((eq, h[0]), (eqd, h[1]), (eqdd, h[2])):
+        predicted = sigma**2 * float(row @ row)
+        assert np.var(est[-1]) == pytest.approx(predicted, rel=0.1)  # 4.5 sd of the estimate
+
+
+def test_butterworth_noise_follows_its_noise_equivalent_bandwidth() -> None:
+    """Output variance = sigma^2 x 2 B dt, B = pi fc / (2 sqrt 2) (2nd-order Butterworth)."""
+    dt, sigma, fc = 1e-3, 0.01, 20.0
+    e = make_estimator("butterworth", N_COLS, {"butterworth_cutoff_hz": fc})
+    x = white(400, sigma, 2)
+    x[0] = 0.0  # start at rest on 0: the filter starts at its first input
+    eq, *_ = feed(e, stamps(400, dt), x)
+    predicted = sigma**2 * 2 * (math.pi * fc / (2 * math.sqrt(2))) * dt
+    assert np.var(eq[-1]) == pytest.approx(predicted, rel=0.1)
+
+
+def test_kalman_error_covariance_is_its_steady_state_covariance() -> None:
+    """On a signal that IS the model (white jerk of the assumed density, white position
+    noise of the stated std), the estimation error's variance equals the filter's own
+    steady-state posterior covariance, for q, qd and qdd."""
+    dt, psd, r = 0.01, 3e3, math.radians(0.5)
+    rng = np.random.default_rng(3)
+    n_s = 300
+    f, qn = transition(dt), process_noise(dt, psd)
+    chol = np.linalg.cholesky(qn)
+    x = np.zeros((3, N_COLS))
+    truth = np.empty((n_s, 3, N_COLS))
+    for k in range(n_s):
+        x = f @ x + chol @ rng.standard_normal((3, N_COLS))
+        truth[k] = x
+    z = truth[:, 0, :] + rng.normal(0.0, r, (n_s, N_COLS))
+    e = make_estimator("kalman", N_COLS, {"kalman_jerk_psd": psd, "kalman_noise_deg": 0.5})
+    eq, eqd, eqdd, _ = feed(e, stamps(n_s, dt), z)
+    k, p_prior = steady_state(dt, r, None, psd)
+    h = np.array([[1.0, 0.0, 0.0]])
+    p_post = (np.eye(3) - k @ h) @ p_prior
+    for i, est in enumerate((eq, eqd, eqdd)):
+        err = est[-1] - truth[-1, i]
+        assert np.var(err) == pytest.approx(p_post[i, i], rel=0.1)
+
+
+def test_kalman_estimates_the_noise_online() -> None:
+    """The believed noise converges to the true one (still and moving joints mixed)."""
+    dt = 0.005
+    t = stamps(1000, dt)
+    q, _, _ = poly(t, np.array([[0.1] * 20, [0.5] * 4 + [0.0] * 16, [-1.0] * 4 + [0.0] * 16]))
+    for deg in (0.1, 2.0):
+        e = make_estimator("kalman", 20)
+        noisy = q + np.random.default_rng(4).normal(0.0, math.radians(deg), q.shape)
+        feed(e, t, noisy)
+        assert math.degrees(e.noise()) == pytest.approx(deg, rel=0.15)
+        assert e.describe(dt)["noise_rad"] == e.noise()
+
+
+# -- predict, refused samples, registry ------------------------------------------------------
+@pytest.mark.parametrize("name", list(ESTIMATORS))
+def test_predict_extrapolates_and_never_changes_the_state(name) -> None:
+    t = stamps(200, 0.01)
+    q, _qd, _qdd = poly(t, COEF2)
+    settings = FIXED_NOISE if name == "kalman" else {}
+    a, b = make_estimator(name, 2, settings), make_estimator(name, 2, settings)
+    for k in range(150):
+        a.update(int(t[k]), q[k], None)
+        b.update(int(t[k]), q[k], None)
+        for frac in (0.3, 0.6, 0.9):  # a 1 kHz output timer between samples, several times
+            a.predict(int(t[k] + frac * 1e7))
+    # predict(t) = the last update's estimate extrapolated with constant acceleration
+    last = (b.q.copy(), b.qd.copy(), b.qdd.copy())
+    a.predict(int(t[149] + 5_000_000))
+    dt = 0.005
+    np.testing.assert_allclose(a.q, last[0] + dt * last[1] + 0.5 * dt * dt * last[2], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.qd, last[1] + dt * last[2], rtol=0, atol=1e-12)
+    for k in range(150, 200):  # and the filter continues as if predict had never been called
+        a.update(int(t[k]), q[k], None)
+        b.update(int(t[k]), q[k], None)
+        np.testing.assert_array_equal(a.qdd, b.qdd)
+        np.testing.assert_array_equal(a.q, b.q)
+    if name in ("kalman", "savgol"):  # exact models: the prediction of a quadratic is exact
+        a.predict(int(t[199] + 7_000_000))
+        tq, tqd, _ = poly(np.append(t, t[199] + 7_000_000), COEF2)
+        np.testing.assert_allclose(a.q, tq[-1], atol=1e-7)
+        np.testing.assert_allclose(a.qd, tqd[-1], atol=1e-6)
+
+
+@pytest.mark.parametrize("name", list(ESTIMATORS))
+@pytest.mark.parametrize("bad", ["nan_q", "inf_qd", "old_stamp", "same_stamp"])
+def test_a_refused_sample_never_enters_the_state(name, bad) -> None:
+    t = stamps(120, 0.01)
+    q, qd, _ = poly(t, COEF2)
+    q = q + np.random.default_rng(6).normal(0, 1e-3, q.shape)
+    vel = bad == "inf_qd"
+    a, b = make_estimator(name, 2), make_estimator(name, 2)
+    for k in range(60):
+        a.update(int(t[k]), q[k], qd[k] if vel else None)
+        b.update(int(t[k]), q[k], qd[k] if vel else None)
+    before = copy.deepcopy(a.__dict__)
+    bad_q, bad_qd, stamp = q[60].copy(), qd[60].copy(), int(t[60])
+    if bad == "nan_q":
+        bad_q[1] = np.nan
+    elif bad == "inf_qd":
+        bad_qd[0] = np.inf
+    elif bad == "old_stamp":
+        stamp = int(t[30])
+    else:
+        stamp = int(t[59])
+    with pytest.raises(ValueError, match="non-finite|not after"):
+        a.update(stamp, bad_q, bad_qd if vel else None)
+    assert a.__dict__.keys() == before.keys()
+    for key, value in before.items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(a.__dict__[key], value, err_msg=key)
+    for k in range(60, 120):
+        a.update(int(t[k]), q[k], qd[k] if vel else None)
+        b.update(int(t[k]), q[k], qd[k] if vel else None)
+        np.testing.assert_array_equal(a.qdd, b.qdd)
+
+
+def test_registry_settings_and_descriptions() -> None:
+    assert next(iter(ESTIMATORS)) == DEFAULT_ESTIMATOR
+    with pytest.raises(ValueError, match="unknown estimator"):
+        make_estimator("magic", 3)
+    with pytest.raises(ValueError, match="no setting"):
+        make_estimator("butterworth", 3, {"savgol_window_s": 0.1})
+    with pytest.raises(ValueError, match="outside"):
+        make_estimator("kalman", 3, {"kalman_jerk_psd": -1.0})
+    names = [s.name for cls in ESTIMATORS.values() for s in cls.settings]
+    assert len(names) == len(set(names)) == len(all_settings())  # no name means two things
+    for name in ESTIMATORS:
+        d = make_estimator(name, 3).describe(0.01)
+        assert d["method"] == name and set(d["lag_s"]) == {"q", "qd", "qdd"}
+        assert all(v >= 0.0 for v in d["lag_s"].values())
+
+
+def test_kalman_lag_matches_a_constant_jerk() -> None:
+    """lag()['qdd'] is the delay of qdd under a constant jerk, measured on a cubic."""
+    dt = 0.004
+    t = stamps(3000, dt)
+    q, _, qdd = poly(t, np.array([[0.0], [0.0], [0.0], [1.0 / 6.0]]))  # jerk 1
+    e = make_estimator("kalman", 1, FIXED_NOISE)
+    _, _, eqdd, _ = feed(e, t, q)
+    assert qdd[-1, 0] - eqdd[-1, 0] == pytest.approx(e.lag(dt, False)["qdd"], rel=1e-4)
+
+
+def test_kalman_on_exact_input_believes_its_noise_floor() -> None:
+    """Noiseless positions and velocities at 1 kHz (trajectory_publisher): the online noise
+    estimates settle on the floor (no negative variance, no math error) and qdd is exact."""
+    t = stamps(3000, 1e-3)
+    q, qd, qdd = poly(t, np.repeat(COEF2, 10, axis=1))
+    e = make_estimator("kalman", 20)
+    _, _, eqdd, _ = feed(e, t, q, qd)
+    floor = math.radians(e.values["kalman_noise_floor_deg"])
+    assert e.noise() == pytest.approx(floor) and e.velocity_noise() == pytest.approx(floor)
+    np.testing.assert_allclose(eqdd[-100:], qdd[-100:], rtol=0, atol=1e-6)
