@@ -1,0 +1,64 @@
+"""Synthetic bags for the replay tests: JointState streams with known stamps and log times."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from forearm_dynamics import JOINT_NAMES
+from forearm_dynamics.bag import BagWriter, TopicQos
+
+MS = 1_000_000
+T0 = 1_700_000_000_000_000_000
+
+
+def joint_state(stamp_ns: int, q, qd=None, effort=None) -> bytes:
+    m = JointState()
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    m.header.frame_id = "humerus"
+    m.name = list(JOINT_NAMES)
+    m.position = [float(x) for x in q]
+    m.velocity = [] if qd is None else [float(x) for x in qd]
+    m.effort = [] if effort is None else [float(x) for x in effort]
+    return serialize_message(m)
+
+
+def smooth_motion(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """q, qd (N, 20): every joint a different slow sine, inside its range."""
+    j = np.arange(20)
+    w = 2 * np.pi * (0.3 + 0.05 * j)
+    q = 0.3 + 0.25 * np.sin(np.outer(t, w) + j)
+    qd = 0.25 * w * np.cos(np.outer(t, w) + j)
+    return q, qd
+
+
+def write_stream_bag(path: Path, n: int, *, period_ns: int = MS, t0_ns: int = T0,
+                     latency_ns: int = 300_000, jitter_ns: int = 0, gap_after: int | None = None,
+                     gap_ns: int = 0, extra_topic: bool = False, seed: int = 3) -> dict:
+    """joint_states at 1/period with log time = stamp + latency (+ jitter); optionally a
+    silent gap after sample `gap_after`, and a best-effort header-less `status` String
+    topic every 10th sample. Returns what was written (stamps, logs, payloads)."""
+    rng = np.random.default_rng(seed)
+    stamps = t0_ns + np.arange(n, dtype=np.int64) * period_ns
+    if gap_after is not None:
+        stamps[gap_after + 1:] += gap_ns
+    logs = stamps + latency_ns + (rng.integers(0, jitter_ns, n) if jitter_ns else 0)
+    q, qd = smooth_motion((stamps - t0_ns) / 1e9)
+    payloads, status = [], []
+    with BagWriter(path) as w:
+        js = w.add_topic("/joint_states", "sensor_msgs/msg/JointState", TopicQos(depth=1000))
+        st = w.add_topic("/status", "std_msgs/msg/String",
+                         TopicQos(depth=10, reliability="best_effort")) if extra_topic else None
+        for k in range(n):
+            data = joint_state(int(stamps[k]), q[k], qd[k])
+            payloads.append(data)
+            w.write(js, data, int(logs[k]))
+            if st is not None and k % 10 == 0:
+                s = serialize_message(String(data=f"sample {k}"))
+                status.append(s)
+                w.write(st, s, int(logs[k]) + 1000)
+    return {"stamps": stamps, "logs": logs, "payloads": payloads, "status": status, "q": q, "qd": qd}
