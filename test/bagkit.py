@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
 from rclpy.serialization import serialize_message
+from rosproc import _LOG_DIR, BIN, NodeProcess, ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -62,3 +65,13 @@ def write_stream_bag(path: Path, n: int, *, period_ns: int = MS, t0_ns: int = T0
                 status.append(s)
                 w.write(st, s, int(logs[k]) + 1000)
     return {"stamps": stamps, "logs": logs, "payloads": payloads, "status": status, "q": q, "qd": qd}
+
+
+def start_player(bag, *ros_args: str) -> NodeProcess:
+    """`bag_player BAG --ros-args ...` (the bag path comes before --ros-args), as rosproc.start."""
+    args = [str(BIN / "bag_player"), str(bag), "--ros-args", *ros_args]
+    out = Path(tempfile.mkstemp(prefix="bag_player_", suffix=".out", dir=_LOG_DIR)[1])
+    err = out.with_suffix(".err")
+    with out.open("wb") as fo, err.open("wb") as fe:
+        proc = subprocess.Popen(args, env=ros_env(), stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
+    return NodeProcess("bag_player", args, proc, out, err)

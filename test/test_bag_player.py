@@ -6,16 +6,15 @@ from __future__ import annotations
 
 import struct
 import subprocess
-import tempfile
 import time
-from pathlib import Path
 
+import bagkit
 import numpy as np
 import pytest
 from bagkit import MS, write_stream_bag
 from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from rosproc import _LOG_DIR, BIN, NodeProcess, Peer, domain_id, ros_env
+from rosproc import BIN, Peer, domain_id, ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -62,14 +61,8 @@ class Listener:
 
 
 def start_player(bag_path, *ros_args: str):
-    """bag_player BAG --ros-args ... (the bag path comes before --ros-args)."""
-    args = [str(BIN / "bag_player"), str(bag_path), "--ros-args", "-p", "start_delay:=0.3",
-            "-p", "subscriber_timeout:=30.0", *ros_args]
-    out = Path(tempfile.mkstemp(prefix="bag_player_", suffix=".out", dir=_LOG_DIR)[1])
-    err = out.with_suffix(".err")
-    with out.open("wb") as fo, err.open("wb") as fe:
-        proc = subprocess.Popen(args, env=ros_env(), stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
-    return NodeProcess("bag_player", args, proc, out, err)
+    return bagkit.start_player(bag_path, "-p", "start_delay:=0.3", "-p", "subscriber_timeout:=30.0",
+                               *ros_args)
 
 
 def test_plays_every_message_in_order_never_early(bag):

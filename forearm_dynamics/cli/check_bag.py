@@ -42,6 +42,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="reference torques file (default: the shipped one)")
     ap.add_argument("--recover", type=Path, metavar="OUT",
                     help="rewrite a truncated bag as a complete one into OUT, then exit")
+    ap.add_argument("--baseline", type=Path, metavar="OLD",
+                    help="regression: compare joint_torques with OLD's, stamp by stamp")
+    ap.add_argument("--tolerance", type=float, default=1e-6, metavar="NM",
+                    help="with --baseline: largest allowed |difference| (N·m, default 1e-6)")
     return ap.parse_args(argv)
 
 
@@ -152,9 +156,23 @@ def _recover(src: Path, dst: Path) -> int:
     return 0
 
 
+def _regression(args: argparse.Namespace) -> int:
+    from ..bag import regression
+
+    rep = regression.compare(args.bag, args.baseline, args.tolerance)
+    code = 1 if rep.failures else 0
+    print("\n".join(regression.format_report(rep)))
+    if args.json is not None:
+        args.json.write_text(json.dumps({**regression.to_dict(rep), "exit_code": code}, indent=1),
+                             encoding="utf-8")
+    return code
+
+
 def run(args: argparse.Namespace) -> int:
     if args.recover is not None:
         return _recover(args.bag, args.recover)
+    if args.baseline is not None:
+        return _regression(args)
     th = Thresholds.load(args.thresholds)
     bag = open_bag(args.bag)
     info = bag.info
