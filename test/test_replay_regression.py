@@ -138,3 +138,16 @@ def test_regression_fails_on_a_changed_torque_or_a_lost_sample(bags, tmp_path):
     assert rep["unmatched_baseline"] == 1 and rep["unmatched_new"] == 0
     r, _ = check_bag(changed, "--baseline", baseline)  # default tolerance 1e-6: within it
     assert r.returncode == 0, r.stdout
+
+
+def test_check_bag_scores_the_markerless_replay(bags):
+    """The replayed run carries no movement markers (only joint_states were played): check_bag
+    scores it as one segment, every sample answered."""
+    _, new = bags
+    r, rep = check_bag(new)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert rep["mode"] == "markerless"
+    assert rep["samples"] == 1500 * len(MOVEMENTS)
+    assert rep["delivery"]["lost"] == 0 and rep["delivery"]["joint_torques"] == 1500 * len(MOVEMENTS)
+    assert rep["model"]["kind"] == "segmented"
+    assert sum(v is not None for v in rep["nrmse"].values()) >= 10

@@ -6,8 +6,10 @@
 Exit codes: 0 all thresholds met; 1 a threshold exceeded (each failure named: movement,
 DOF, value); 2 the bag cannot be analysed (missing, empty, not MCAP, truncated before the
 first complete chunk, a damaged chunk in an indexed bag, no joint_torques, torques without
-the model's joints, no movement markers or none of a known movement): one line, no traceback.
-A truncated bag that still holds data is analysed, with a warning.
+the model's joints, markers of no known movement): one line, no traceback.
+A truncated bag that still holds data is analysed, with a warning. A bag without movement
+markers (any recording) is scored as one segment against its own filtered positions
+(bag/score.py); `--baseline OLD` compares two runs' torques (bag/regression.py).
 """
 
 from __future__ import annotations
@@ -168,6 +170,24 @@ def _regression(args: argparse.Namespace) -> int:
     return code
 
 
+def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> int:
+    from ..bag import score
+
+    if rec.joint_states is None or len(rec.joint_states) == 0:
+        raise BagError("foreign", f"{args.bag}: no movement markers and no joint_states: "
+                       "nothing to compute a reference from")
+    if not info.complete:
+        rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
+                            f"{info.message_count} messages of its complete chunks")
+    report = score.analyse_markerless(rec, choice, th)
+    code = 1 if report.failures else 0
+    print("\n".join(score.format_score(report, info)))
+    if args.json is not None:
+        args.json.write_text(json.dumps({**score.score_dict(report), "exit_code": code}, indent=1),
+                             encoding="utf-8")
+    return code
+
+
 def run(args: argparse.Namespace) -> int:
     if args.recover is not None:
         return _recover(args.bag, args.recover)
@@ -196,9 +216,8 @@ def run(args: argparse.Namespace) -> int:
                        f"built ({exc})") from None
     rec = read_recording(bag, choice.arm.joint_names)
     rec.warnings[:0] = config_warnings
-    if not rec.markers:
-        raise BagError("foreign", f"{args.bag}: no movement markers on the movement topic; "
-                       "cannot split the run into movements")
+    if not rec.markers:  # any recording (a subject's session): scored as one segment
+        return _markerless(args, rec, choice, th, info)
     if not any(_known_movement(m.id) for m in rec.markers):
         ids = sorted({m.id for m in rec.markers})
         raise BagError("foreign", f"{args.bag}: no movement marker names a known movement (ids "
