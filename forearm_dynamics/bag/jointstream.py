@@ -28,6 +28,20 @@ class JointStream:
     position: np.ndarray  # (N, J) NaN where a joint is missing
     velocity: np.ndarray  # (N, J) NaN where missing (or the message has no velocities)
     has_velocity: np.ndarray  # (N,) bool: every requested joint has a velocity
+    effort: np.ndarray | None = None  # (N, J) NaN where missing; read when asked
+
+
+def tidy(data: bytes) -> bytes:
+    """JointState CDR as rclpy serialises it, without its junk: padding bytes zeroed and the
+    spare bytes rclpy's serialiser leaves after an empty sequence cut off (to a multiple of 4,
+    as on the wire). Strict readers (rosbags) check the size; unchanged if not parseable."""
+    try:
+        lay = parse_layout(data)
+    except NotMine:
+        return data
+    end = (lay.meaningful.bit_length() + 7) // 8
+    end += -end % 4
+    return lay.zero_padding(data)[:end]
 
 
 def _index(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -36,7 +50,8 @@ def _index(names: tuple[str, ...], joint_names: tuple[str, ...]) -> tuple[np.nda
     return idx, idx >= 0
 
 
-def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...]) -> JointStream:
+def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...],
+                      effort: bool = False) -> JointStream:
     """Every message of `topic`; BagError if it is absent, empty or does not decode."""
     ch = bag.info.find_topic(topic)
     if ch is None:
@@ -45,7 +60,7 @@ def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...]) -> Joi
     if not ch.schema_name.endswith("JointState"):
         raise BagError("foreign", f"{bag.path}: {ch.topic} is {ch.schema_name}, not sensor_msgs/msg/JointState")
     nj = len(joint_names)
-    stamps, logs, frames, rows_q, rows_v = [], [], [], [], []
+    stamps, logs, frames, rows_q, rows_v, rows_e = [], [], [], [], [], []
     layouts: dict[tuple[int, bytes], tuple] = {}
     last = None
     for k, (_ch, msg) in enumerate(bag.messages([ch.topic]), 1):
@@ -69,6 +84,7 @@ def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...]) -> Joi
                 plan = None
         q = np.full(nj, np.nan)
         v = np.full(nj, np.nan)
+        e = np.full(nj, np.nan)
         if plan is not None:
             last = plan
             lay, idx, ok, has_v, frame = plan
@@ -76,6 +92,8 @@ def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...]) -> Joi
             q[ok] = pos[idx[ok]]
             if has_v:
                 v[:] = np.frombuffer(data, np.float64, lay.n_vel, lay.vel_off)[idx]
+            if effort and lay.n_eff == len(lay.names):
+                e[ok] = np.frombuffer(data, np.float64, lay.n_eff, lay.eff_off)[idx[ok]]
             sec = int.from_bytes(data[4:8], "little", signed=True)
             nsec = int.from_bytes(data[8:12], "little")
         else:
@@ -90,6 +108,8 @@ def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...]) -> Joi
             has_v = len(m.velocity) == len(m.name) and ok.all()
             if has_v:
                 v[:] = np.asarray(m.velocity, float)[idx]
+            if effort and len(m.effort) == len(m.name):
+                e[ok] = np.asarray(m.effort, float)[idx[ok]]
             sec, nsec = m.header.stamp.sec, m.header.stamp.nanosec
             frame = m.header.frame_id
         stamps.append(sec * 1_000_000_000 + nsec)
@@ -97,9 +117,12 @@ def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...]) -> Joi
         frames.append(frame)
         rows_q.append(q)
         rows_v.append(v)
+        if effort:
+            rows_e.append(e)
     if not stamps:
         raise BagError("no_data", f"{bag.path}: {ch.topic} holds no message"
                        + (f" (truncated: {bag.info.problem})" if not bag.info.complete else ""))
     vel = np.array(rows_v)
     return JointStream(ch.topic, np.array(stamps, np.int64), np.array(logs, np.int64), frames,
-                       np.array(rows_q), vel, np.isfinite(vel).all(axis=1))
+                       np.array(rows_q), vel, np.isfinite(vel).all(axis=1),
+                       np.array(rows_e) if effort else None)
