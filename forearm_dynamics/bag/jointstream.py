@@ -60,69 +60,86 @@ def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...],
     if not ch.schema_name.endswith("JointState"):
         raise BagError("foreign", f"{bag.path}: {ch.topic} is {ch.schema_name}, not sensor_msgs/msg/JointState")
     nj = len(joint_names)
-    stamps, logs, frames, rows_q, rows_v, rows_e = [], [], [], [], [], []
-    layouts: dict[tuple[int, bytes], tuple] = {}
-    last = None
-    for k, (_ch, msg) in enumerate(bag.messages([ch.topic]), 1):
+    plans: list[tuple] = []  # (layout, idx, ok, has_v, frame)
+    plan_of: dict[tuple[int, bytes], int] = {}
+    which: list[int] = []  # per message: plan number, or -1 (decoded by rclpy)
+    datas: list[bytes] = []
+    logs: list[int] = []
+    slow: dict[int, tuple] = {}  # message index -> (stamp, frame, q, v, e)
+    last = -1
+    for k, (_ch, msg) in enumerate(bag.messages([ch.topic])):
         data = msg.data
-        plan = None
-        if last is not None and last[0].matches(data):
-            plan = last
-        else:
-            try:
-                lay = parse_layout(data)
-                key = (lay.size, bytes(data[12:lay.key_end]))
-                plan = layouts.get(key)
-                if plan is None:
-                    verify_layout(lay, data)
-                    idx, ok = _index(lay.names, joint_names)
-                    if lay.n_pos != len(lay.names):
-                        raise NotMine("position count differs from names")
-                    plan = layouts[key] = (lay, idx, ok, lay.n_vel == len(lay.names) and ok.all(),
-                                           lay.frame_id.decode("utf-8", "replace"))
-            except NotMine:
-                plan = None
-        q = np.full(nj, np.nan)
-        v = np.full(nj, np.nan)
-        e = np.full(nj, np.nan)
-        if plan is not None:
-            last = plan
-            lay, idx, ok, has_v, frame = plan
-            pos = np.frombuffer(data, np.float64, lay.n_pos, lay.pos_off)
-            q[ok] = pos[idx[ok]]
-            if has_v:
-                v[:] = np.frombuffer(data, np.float64, lay.n_vel, lay.vel_off)[idx]
-            if effort and lay.n_eff == len(lay.names):
-                e[ok] = np.frombuffer(data, np.float64, lay.n_eff, lay.eff_off)[idx[ok]]
-            sec = int.from_bytes(data[4:8], "little", signed=True)
-            nsec = int.from_bytes(data[8:12], "little")
-        else:
-            try:
-                m = deserialize_message(bytes(data), JointState)
-            except Exception as exc:  # noqa: BLE001 - rclpy raises several types
-                raise BagError("schema", f"{bag.path}: {ch.topic} message {k} does not decode as "
-                               f"JointState ({type(exc).__name__})") from None
-            idx, ok = _index(tuple(m.name), joint_names)
-            if len(m.position) == len(m.name):
-                q[ok] = np.asarray(m.position, float)[idx[ok]]
-            has_v = len(m.velocity) == len(m.name) and ok.all()
-            if has_v:
-                v[:] = np.asarray(m.velocity, float)[idx]
-            if effort and len(m.effort) == len(m.name):
-                e[ok] = np.asarray(m.effort, float)[idx[ok]]
-            sec, nsec = m.header.stamp.sec, m.header.stamp.nanosec
-            frame = m.header.frame_id
-        stamps.append(sec * 1_000_000_000 + nsec)
         logs.append(msg.log_time)
-        frames.append(frame)
-        rows_q.append(q)
-        rows_v.append(v)
-        if effort:
-            rows_e.append(e)
-    if not stamps:
+        if last >= 0 and plans[last][0].matches(data):
+            which.append(last)
+            datas.append(data)
+            continue
+        pid = -1
+        try:
+            lay = parse_layout(data)
+            key = (lay.size, bytes(data[12:lay.key_end]))
+            pid = plan_of.get(key, -1)
+            if pid < 0:
+                verify_layout(lay, data)
+                if lay.n_pos != len(lay.names):
+                    raise NotMine("position count differs from names")
+                idx, ok = _index(lay.names, joint_names)
+                plans.append((lay, idx, ok, lay.n_vel == len(lay.names) and ok.all(),
+                              lay.n_eff == len(lay.names), lay.frame_id.decode("utf-8", "replace")))
+                pid = plan_of[key] = len(plans) - 1
+        except NotMine:
+            pid = -1
+        which.append(pid)
+        datas.append(data if pid >= 0 else b"")
+        if pid >= 0:
+            last = pid
+            continue
+        try:
+            m = deserialize_message(bytes(data), JointState)
+        except Exception as exc:  # noqa: BLE001 - rclpy raises several types
+            raise BagError("schema", f"{bag.path}: {ch.topic} message {k + 1} does not decode as "
+                           f"JointState ({type(exc).__name__})") from None
+        idx, ok = _index(tuple(m.name), joint_names)
+        q, v, e = np.full(nj, np.nan), np.full(nj, np.nan), np.full(nj, np.nan)
+        if len(m.position) == len(m.name):
+            q[ok] = np.asarray(m.position, float)[idx[ok]]
+        if len(m.velocity) == len(m.name) and ok.all():
+            v[:] = np.asarray(m.velocity, float)[idx]
+        if len(m.effort) == len(m.name):
+            e[ok] = np.asarray(m.effort, float)[idx[ok]]
+        slow[k] = (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, m.header.frame_id, q, v, e)
+    n = len(which)
+    if not n:
         raise BagError("no_data", f"{bag.path}: {ch.topic} holds no message"
                        + (f" (truncated: {bag.info.problem})" if not bag.info.complete else ""))
-    vel = np.array(rows_v)
-    return JointStream(ch.topic, np.array(stamps, np.int64), np.array(logs, np.int64), frames,
-                       np.array(rows_q), vel, np.isfinite(vel).all(axis=1),
-                       np.array(rows_e) if effort else None)
+    which_a = np.array(which)
+    stamps = np.zeros(n, np.int64)
+    frames = [""] * n
+    pos = np.full((n, nj), np.nan)
+    vel = np.full((n, nj), np.nan)
+    eff = np.full((n, nj), np.nan) if effort else None
+    for pid, (lay, idx, ok, has_v, has_e, frame) in enumerate(plans):
+        rows = np.flatnonzero(which_a == pid)
+        if not len(rows):
+            continue
+        buf = np.frombuffer(b"".join([datas[i] for i in rows]), np.uint8).reshape(len(rows), lay.size)
+
+        def col(off: int, count: int, buf=buf) -> np.ndarray:
+            return np.ascontiguousarray(buf[:, off:off + 8 * count]).view("<f8")
+
+        stamps[rows] = np.ascontiguousarray(buf[:, 4:8]).view("<i4")[:, 0].astype(np.int64) * 1_000_000_000 \
+            + np.ascontiguousarray(buf[:, 8:12]).view("<u4")[:, 0]
+        for i in rows:
+            frames[i] = frame
+        sel = np.flatnonzero(ok)
+        pos[np.ix_(rows, sel)] = col(lay.pos_off, lay.n_pos)[:, idx[sel]]
+        if has_v:
+            vel[rows] = col(lay.vel_off, lay.n_vel)[:, idx]
+        if effort and has_e:
+            eff[np.ix_(rows, sel)] = col(lay.eff_off, lay.n_eff)[:, idx[sel]]
+    for i, (stamp, frame, q, v, e) in slow.items():
+        stamps[i], frames[i], pos[i], vel[i] = stamp, frame, q, v
+        if effort:
+            eff[i] = e
+    return JointStream(ch.topic, stamps, np.array(logs, np.int64), frames, pos, vel,
+                       np.isfinite(vel).all(axis=1), eff)
