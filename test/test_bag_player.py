@@ -247,3 +247,68 @@ def test_truncated_bag_plays_its_complete_chunks(tmp_path):
     assert 0 < len(got) < 6000
     assert got == written["payloads"][: len(got)]
     assert "truncated" in proc.output()
+
+
+def test_plays_a_bag_written_by_another_rosbag2_writer(tmp_path):
+    """A rosbag2 MCAP written by rosbags (an independent implementation), not by us."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    JS = ts.types["sensor_msgs/msg/JointState"]
+    Hdr, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+    out = tmp_path / "foreign_bag"
+    payloads = []
+    with Writer(out, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/joint_states", JS.__msgtype__, typestore=ts)
+        for k in range(300):
+            t = bagkit.T0 + k * MS
+            msg = JS(header=Hdr(stamp=Time(sec=t // 10**9, nanosec=t % 10**9), frame_id="x"),
+                     name=["a", "b"], position=np.array([0.1 * k, 1.0]), velocity=np.array([1.0, 2.0]),
+                     effort=np.array([3.0, 4.0]))
+            data = bytes(ts.serialize_cdr(msg, JS.__msgtype__))
+            payloads.append(data)
+            w.write(conn, t, data)
+    assert len(list(out.glob("*.mcap"))) == 1
+    lis = Listener()
+    proc = start_player(out)  # the bag directory, as `ros2 bag record` leaves it
+    try:
+        lis.receive(proc, 300)
+        assert proc.wait(30) == 0, proc.output()
+    finally:
+        if proc.running():
+            proc.stop()
+        lis.close()
+    got = [d for _, d in lis.got]
+    assert len(got) == 300
+    for d, o in zip(got, payloads, strict=True):
+        assert d[:len(o)] == o and not d[len(o):].strip(b"\0")
+
+
+def test_timing_by_stamp_and_start_offset(tmp_path):
+    """Log times with a 1 s recorder stall that the stamps do not have: timing:=stamp plays
+    by the stamps (no stall), /clock then carries the stamps; start_offset skips the start."""
+    path = tmp_path / "stall.mcap"
+    w = write_stream_bag(path, 1000)
+    from forearm_dynamics.bag import BagWriter, TopicQos, open_bag
+
+    stalled = tmp_path / "stalled.mcap"
+    with BagWriter(stalled) as out:
+        ch = out.add_topic("/joint_states", "sensor_msgs/msg/JointState", TopicQos())
+        for k, (_c, m) in enumerate(open_bag(path).messages()):
+            out.write(ch, m.data, m.log_time + (1_000_000_000 if k >= 500 else 0))
+    lis = Listener(clock=True)
+    proc = start_player(stalled, "-p", "timing:=stamp", "-p", "clock:=true", "-p", "start_offset:=0.2")
+    try:
+        lis.receive(proc, 800)
+        lis.peer.spin_until(lambda: len(lis.clock) >= 800, 10)
+        assert proc.wait(30) == 0, proc.output()
+    finally:
+        if proc.running():
+            proc.stop()
+        lis.close()
+    got = [d for _, d in lis.got]
+    assert got == w["payloads"][200:]  # 0.2 s in: from sample 200
+    t = np.array([r for r, _ in lis.got])
+    assert (t[300] - t[299]) / 1e9 < 0.5  # the log-time stall (1 s) is not replayed
+    np.testing.assert_array_equal(np.array(lis.clock), w["stamps"][200:])

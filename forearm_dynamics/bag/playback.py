@@ -13,9 +13,11 @@ median (stamp - log time) of the header topics, so both kinds stay on one time l
 
 from __future__ import annotations
 
+import os
 import re
 import struct
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -27,6 +29,20 @@ TIMINGS = ("log", "stamp")
 _STAMP_LE = struct.Struct("<iI")
 _STAMP_BE = struct.Struct(">iI")
 _FIELD = re.compile(r"^\s*([A-Za-z0-9_/]+)(?:\[[^\]]*\])?\s+([A-Za-z0-9_]+)\s*(=.*)?$")
+
+
+def bag_file(path: str | os.PathLike) -> Path:
+    """The MCAP file of BAG: the file itself, or the one .mcap in a rosbag2 bag directory
+    (what `ros2 bag record -s mcap` writes: metadata.yaml + one file per split)."""
+    path = Path(path)
+    if not path.is_dir():
+        return path
+    files = sorted(path.glob("*.mcap"))
+    if len(files) != 1:
+        raise BagError("missing", f"{path}: a directory with {len(files)} .mcap files; "
+                       + ("name one of them (split bags are played one file at a time)" if files
+                          else "not a rosbag2 MCAP bag"))
+    return files[0]
 
 
 def has_header(ch: ChannelInfo) -> bool:

@@ -43,7 +43,7 @@ from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
 from ..bag import BagError, open_bag
-from ..bag.playback import TIMINGS, Playlist, load_playlist, write_stamp
+from ..bag.playback import TIMINGS, Playlist, bag_file, load_playlist, write_stamp
 from ..bag.schemas import message_class
 from ..exit_codes import USAGE
 from .common import run
@@ -267,8 +267,8 @@ def main(argv: list[str] | None = None) -> None:
         print(f"usage: {NAME} BAG [--ros-args -p topics:=[joint_states] -p rate:=1.0 ...]",
               file=sys.stderr)
         sys.exit(USAGE)
-    bag = positional[0]
     try:  # a bag that cannot be played: one line, before any ROS set-up
+        bag = str(bag_file(positional[0]))
         open_bag(bag)
     except BagError as exc:
         print(f"{NAME}: error: {exc}", file=sys.stderr)
