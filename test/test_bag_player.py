@@ -205,7 +205,8 @@ def test_clock(bag):
     np.testing.assert_array_equal(np.array(lis.clock), written["logs"])
 
 
-@pytest.mark.parametrize("kind", ["empty", "not_mcap", "missing", "no_topic", "truncated_to_nothing"])
+@pytest.mark.parametrize("kind", ["empty", "not_mcap", "missing", "no_topic", "truncated_to_nothing",
+                                  "garbage"])
 def test_bad_bags_one_line_exit_2(tmp_path, bag, kind):
     path = tmp_path / "bad.mcap"
     args = []
@@ -216,6 +217,13 @@ def test_bad_bags_one_line_exit_2(tmp_path, bag, kind):
     elif kind == "no_topic":
         path = bag[0]
         args = ["--ros-args", "-p", "topics:=[nope]"]
+    elif kind == "garbage":
+        from forearm_dynamics.bag import BagWriter
+
+        with BagWriter(path) as w:
+            ch = w.add_topic("/joint_states", "sensor_msgs/msg/JointState")
+            for k in range(20):
+                w.write(ch, b"\x00\x01\x00\x00" + bytes(range(k, k + 40)), bagkit.T0 + k)
     elif kind == "truncated_to_nothing":
         path.write_bytes(bag[0].read_bytes()[:30])
     r = subprocess.run([str(BIN / "bag_player"), str(path), *args], env=ros_env(), capture_output=True,
@@ -224,6 +232,8 @@ def test_bad_bags_one_line_exit_2(tmp_path, bag, kind):
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1, r.stderr
     assert "Traceback" not in r.stderr + r.stdout
+    if kind == "garbage":
+        assert "does not decode" in r.stderr
 
 
 def test_truncated_bag_plays_its_complete_chunks(tmp_path):

@@ -4,6 +4,7 @@ message plus joint_torques equal to the model's inverse dynamics of the estimate
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 
 import numpy as np
@@ -13,6 +14,7 @@ from rosbags.highlevel import AnyReader
 from rosproc import BIN, ros_env
 
 from forearm_dynamics import JOINT_NAMES, build_model
+from forearm_dynamics.bag import BagWriter
 from forearm_dynamics.estimation import make_estimator
 from forearm_dynamics.estimation.offline import backward_batch
 
@@ -103,7 +105,8 @@ def test_batch_estimator_is_the_node_estimator_bit_for_bit():
         assert warm == warm_b[k]
 
 
-@pytest.mark.parametrize("case", ["missing", "not_mcap", "no_topic", "exists", "bad_size"])
+@pytest.mark.parametrize("case", ["missing", "not_mcap", "no_topic", "exists", "bad_size", "garbage",
+                                  "truncated_to_header"])
 def test_bad_input_one_line_exit_2(src, tmp_path, case):
     path, _ = src
     out = tmp_path / "o.mcap"
@@ -120,6 +123,17 @@ def test_bad_input_one_line_exit_2(src, tmp_path, case):
         out.write_text("keep me")
     elif case == "bad_size":
         args = [path, out, "--body-size", "42"]
+    elif case == "garbage":  # a JointState channel whose payloads are noise
+        bad = tmp_path / "noise.mcap"
+        with BagWriter(bad) as w:
+            ch = w.add_topic("/joint_states", "sensor_msgs/msg/JointState")
+            for k in range(20):
+                w.write(ch, os.urandom(200), T0 + k)
+        args = [bad, out]
+    elif case == "truncated_to_header":
+        bad = tmp_path / "cut.mcap"
+        bad.write_bytes(path.read_bytes()[:40])
+        args = [bad, out]
     r = run(*args)
     assert r.returncode == 2, r.stdout + r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr

@@ -38,6 +38,7 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
@@ -102,6 +103,19 @@ def _strings(p: Params, name: str) -> list[str]:
     return list(v)
 
 
+def _check_decodes(pl: Playlist, classes: list[type]) -> None:
+    """The first and last message of each topic must decode as its type: a bag of noise is
+    refused here (one line, exit 2) rather than sent to subscribers that cannot read it."""
+    for k, (topic, cls) in enumerate(zip(pl.topics, classes, strict=True)):
+        rows = np.flatnonzero(pl.topic_index == k)
+        for i in {int(rows[0]), int(rows[-1])}:
+            try:
+                deserialize_message(pl.payloads[i], cls)
+            except Exception as exc:  # noqa: BLE001 - rclpy raises several types
+                raise ParameterError("bag", f"{topic.channel.topic}: message {i + 1} does not decode "
+                                     f"as {topic.channel.schema_name} ({type(exc).__name__})") from None
+
+
 class BagPlayer(Node):
     """Publishers per topic; a playback thread; `done` when played (and drained)."""
 
@@ -128,6 +142,7 @@ class BagPlayer(Node):
             classes = [message_class(t.channel.schema_name) for t in self.playlist.topics]
         except BagError as exc:
             raise ParameterError("bag" if exc.kind not in ("usage",) else "start_offset", str(exc)) from None
+        _check_decodes(self.playlist, classes)
         for w in self.playlist.warnings:
             self.get_logger().warning(w)
         self.pubs = [self.create_publisher(cls, t.channel.topic, qos_from_profile(t.qos))
