@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import tempfile
 from pathlib import Path
@@ -9,6 +10,10 @@ from pathlib import Path
 import numpy as np
 from rclpy.serialization import serialize_message
 from rosproc import _LOG_DIR, BIN, NodeProcess, ros_env
+
+#: A namespace of this test session: other sessions on the machine may share the ROS domain
+#: (rosproc.domain_id() is derived from the pid), never this namespace.
+NS = f"/replay_test_{os.getpid()}"
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -41,10 +46,11 @@ def smooth_motion(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def write_stream_bag(path: Path, n: int, *, period_ns: int = MS, t0_ns: int = T0,
                      latency_ns: int = 300_000, jitter_ns: int = 0, gap_after: int | None = None,
-                     gap_ns: int = 0, extra_topic: bool = False, seed: int = 3) -> dict:
+                     gap_ns: int = 0, extra_topic: bool = False, seed: int = 3, ns: str = "",
+                     chunk_size: int = 1024 * 1024) -> dict:
     """joint_states at 1/period with log time = stamp + latency (+ jitter); optionally a
     silent gap after sample `gap_after`, and a best-effort header-less `status` String
-    topic every 10th sample. Returns what was written (stamps, logs, payloads)."""
+    topic every 10th sample, all under namespace `ns`. Returns what was written."""
     rng = np.random.default_rng(seed)
     stamps = t0_ns + np.arange(n, dtype=np.int64) * period_ns
     if gap_after is not None:
@@ -52,9 +58,9 @@ def write_stream_bag(path: Path, n: int, *, period_ns: int = MS, t0_ns: int = T0
     logs = stamps + latency_ns + (rng.integers(0, jitter_ns, n) if jitter_ns else 0)
     q, qd = smooth_motion((stamps - t0_ns) / 1e9)
     payloads, status = [], []
-    with BagWriter(path) as w:
-        js = w.add_topic("/joint_states", "sensor_msgs/msg/JointState", TopicQos(depth=1000))
-        st = w.add_topic("/status", "std_msgs/msg/String",
+    with BagWriter(path, chunk_size=chunk_size, flush_period_s=3600) as w:
+        js = w.add_topic(f"{ns}/joint_states", "sensor_msgs/msg/JointState", TopicQos(depth=1000))
+        st = w.add_topic(f"{ns}/status", "std_msgs/msg/String",
                          TopicQos(depth=10, reliability="best_effort")) if extra_topic else None
         for k in range(n):
             data = joint_state(int(stamps[k]), q[k], qd[k])

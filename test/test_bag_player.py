@@ -11,7 +11,8 @@ import time
 import bagkit
 import numpy as np
 import pytest
-from bagkit import MS, write_stream_bag
+from bagkit import MS, NS, write_stream_bag
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from rosproc import BIN, Peer, domain_id, ros_env
@@ -32,26 +33,57 @@ def stamp(raw: bytes) -> int:
 @pytest.fixture(scope="module")
 def bag(tmp_path_factory):
     path = tmp_path_factory.mktemp("player") / "stream.mcap"
-    return path, write_stream_bag(path, N, gap_after=999, gap_ns=GAP, extra_topic=True,
+    return path, write_stream_bag(path, N, ns=NS, gap_after=999, gap_ns=GAP, extra_topic=True,
                                   jitter_ns=100_000)
 
 
 class Listener:
-    """A peer subscribed raw to one topic (and optionally /clock)."""
+    """A peer subscribed raw to one topic (and optionally /clock).
 
-    def __init__(self, topic: str = "joint_states", msg_type=JointState, clock: bool = False):
+    Start-up without a race: the player starts once it sees 2 subscribers on its first
+    topic (min_subscribers:=2), but a volatile reader drops what arrives before *it* has
+    matched the writer, and under load that side can lag by seconds. So the second
+    subscriber ("go") is only created after each reader here has matched the player's
+    writer (`receive` does it): when the player starts, the listening side is ready.
+    """
+
+    def __init__(self, topic: str = f"{NS}/joint_states", msg_type=JointState, clock: bool = False):
         self.peer = Peer("player_listener", domain=domain_id())
         self.got: list[tuple[int, bytes]] = []
         self.clock: list[int] = []
-        self.peer.node.create_subscription(
-            msg_type, topic, lambda d: self.got.append((time.perf_counter_ns(), d)),
-            stream_qos(20000), raw=True)
+        self.first = (msg_type, topic)
+        self.go = None
+        self.matched: dict[str, int] = {}  # topic -> publishers matched by this peer's reader
+        self.subscribe(msg_type, topic, lambda d: self.got.append((time.perf_counter_ns(), d)), raw=True)
         if clock:
-            self.peer.node.create_subscription(
-                Clock, "/clock", lambda m: self.clock.append(m.clock.sec * 10**9 + m.clock.nanosec),
-                stream_qos(20000))
+            self.subscribe(Clock, f"{NS}/clock",
+                           lambda m: self.clock.append(m.clock.sec * 10**9 + m.clock.nanosec))
+
+    def subscribe(self, msg_type, topic: str, callback, qos=None, raw: bool = False) -> None:
+        """A subscription whose DDS reader reports when it has matched a writer."""
+        self.matched[topic] = 0
+
+        def on_matched(info, topic=topic):
+            self.matched[topic] = info.current_count
+
+        self.peer.node.create_subscription(
+            msg_type, topic, callback, qos or stream_qos(20000), raw=raw,
+            event_callbacks=SubscriptionEventCallbacks(matched=on_matched))
+
+    def arm(self, proc, timeout: float = 60.0) -> None:
+        """Wait until every reader here has matched the player's writer (the DDS 'matched'
+        event; the ROS graph can know a publisher before the reader matched it), then add
+        the 'go' subscriber."""
+        node = self.peer.node
+        ok = self.peer.spin_until(lambda: all(n >= 1 for n in self.matched.values())
+                                  or not proc.running(), timeout)
+        assert ok and proc.running(), proc.output()
+        self.go = node.create_subscription(self.first[0], self.first[1], lambda _d: None,
+                                           stream_qos(10), raw=True)
 
     def receive(self, proc, count: int, timeout: float = 60.0) -> None:
+        if self.go is None:
+            self.arm(proc)
         ok = self.peer.spin_until(lambda: len(self.got) >= count or not proc.running(), timeout)
         self.peer.spin_for(0.3)
         assert ok, proc.output()
@@ -61,16 +93,16 @@ class Listener:
 
 
 def start_player(bag_path, *ros_args: str):
-    return bagkit.start_player(bag_path, "-p", "start_delay:=0.3", "-p", "subscriber_timeout:=30.0",
-                               *ros_args)
+    """The player, waiting for the listener and its 'go' subscriber (Listener.arm)."""
+    return bagkit.start_player(bag_path, "-p", "start_delay:=0.2", "-p", "subscriber_timeout:=60.0",
+                               "-p", "min_subscribers:=2", "-r", f"/clock:={NS}/clock", *ros_args)
 
 
 def test_plays_every_message_in_order_never_early(bag):
     path, written = bag
     lis = Listener()
     status = []
-    lis.peer.node.create_subscription(String, "status", lambda d: status.append(d),
-                                      stream_qos(1000, reliable=False), raw=True)
+    lis.subscribe(String, f"{NS}/status", status.append, stream_qos(1000, reliable=False), raw=True)
     proc = start_player(path, "-p", "topics:=[joint_states, status]")
     try:
         lis.receive(proc, N)
@@ -104,10 +136,10 @@ def test_offered_qos_is_the_recorded_one(bag):
                         "-p", "subscriber_timeout:=60.0")
     try:
         node = lis.peer.node
-        assert lis.peer.spin_until(lambda: node.get_publishers_info_by_topic("/status")
-                                   and node.get_publishers_info_by_topic("/joint_states"), 30), proc.output()
-        status = node.get_publishers_info_by_topic("/status")[0].qos_profile
-        joints = node.get_publishers_info_by_topic("/joint_states")[0].qos_profile
+        assert lis.peer.spin_until(lambda: node.get_publishers_info_by_topic(f"{NS}/status")
+                                   and node.get_publishers_info_by_topic(f"{NS}/joint_states"), 30), proc.output()
+        status = node.get_publishers_info_by_topic(f"{NS}/status")[0].qos_profile
+        joints = node.get_publishers_info_by_topic(f"{NS}/joint_states")[0].qos_profile
     finally:
         proc.stop()
         lis.close()
@@ -137,7 +169,7 @@ def test_rate_scales_time(bag):
 
 def test_loop_repeats_the_bag(bag, tmp_path):
     short = tmp_path / "short.mcap"
-    written = write_stream_bag(short, 200)
+    written = write_stream_bag(short, 200, ns=NS)
     lis = Listener()
     proc = start_player(short, "-p", "loop:=true")
     try:
@@ -177,8 +209,8 @@ def test_restamp_shifts_stamps_to_now_keeping_spacing(bag):
 
 def test_remap(bag):
     path, written = bag
-    lis = Listener("replayed")
-    proc = start_player(path, "-r", "joint_states:=replayed")
+    lis = Listener(f"{NS}/replayed")
+    proc = start_player(path, "-r", f"{NS}/joint_states:={NS}/replayed")
     try:
         lis.receive(proc, N)
         assert proc.wait(30) == 0, proc.output()
@@ -221,7 +253,7 @@ def test_bad_bags_one_line_exit_2(tmp_path, bag, kind):
         from forearm_dynamics.bag import BagWriter
 
         with BagWriter(path) as w:
-            ch = w.add_topic("/joint_states", "sensor_msgs/msg/JointState")
+            ch = w.add_topic(f"{NS}/joint_states", "sensor_msgs/msg/JointState")
             for k in range(20):
                 w.write(ch, b"\x00\x01\x00\x00" + bytes(range(k, k + 40)), bagkit.T0 + k)
     elif kind == "truncated_to_nothing":
@@ -239,13 +271,14 @@ def test_bad_bags_one_line_exit_2(tmp_path, bag, kind):
 def test_truncated_bag_plays_its_complete_chunks(tmp_path):
     """A bag cut mid-file (recorder killed): the complete chunks play, with a warning."""
     full = tmp_path / "full.mcap"
-    written = write_stream_bag(full, 6000)  # several chunks (1 MiB each, uncompressed)
+    written = write_stream_bag(full, 2000, ns=NS, chunk_size=64 * 1024)  # ~20 chunks
     cut = tmp_path / "cut.mcap"
     data = full.read_bytes()
     cut.write_bytes(data[: len(data) * 2 // 3])
     lis = Listener()
-    proc = start_player(cut, "-p", "rate:=4.0")
+    proc = start_player(cut)
     try:
+        lis.arm(proc)
         ok = lis.peer.spin_until(lambda: not proc.running(), 60)
         lis.peer.spin_for(0.3)
         assert ok and proc.wait(5) == 0, proc.output()
@@ -254,7 +287,7 @@ def test_truncated_bag_plays_its_complete_chunks(tmp_path):
             proc.stop()
         lis.close()
     got = [d for _, d in lis.got]
-    assert 0 < len(got) < 6000
+    assert 0 < len(got) < 2000
     assert got == written["payloads"][: len(got)]
     assert "truncated" in proc.output()
 
@@ -270,7 +303,7 @@ def test_plays_a_bag_written_by_another_rosbag2_writer(tmp_path):
     out = tmp_path / "foreign_bag"
     payloads = []
     with Writer(out, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        conn = w.add_connection("/joint_states", JS.__msgtype__, typestore=ts)
+        conn = w.add_connection(f"{NS}/joint_states", JS.__msgtype__, typestore=ts)
         for k in range(300):
             t = bagkit.T0 + k * MS
             msg = JS(header=Hdr(stamp=Time(sec=t // 10**9, nanosec=t % 10**9), frame_id="x"),
@@ -290,7 +323,7 @@ def test_plays_a_bag_written_by_another_rosbag2_writer(tmp_path):
             proc.stop()
         lis.close()
     got = [d for _, d in lis.got]
-    assert len(got) == 300
+    assert len(got) == 300, proc.output()
     for d, o in zip(got, payloads, strict=True):
         assert d[:len(o)] == o and not d[len(o):].strip(b"\0")
 
@@ -299,12 +332,12 @@ def test_timing_by_stamp_and_start_offset(tmp_path):
     """Log times with a 1 s recorder stall that the stamps do not have: timing:=stamp plays
     by the stamps (no stall), /clock then carries the stamps; start_offset skips the start."""
     path = tmp_path / "stall.mcap"
-    w = write_stream_bag(path, 1000)
+    w = write_stream_bag(path, 1000, ns=NS)
     from forearm_dynamics.bag import BagWriter, TopicQos, open_bag
 
     stalled = tmp_path / "stalled.mcap"
     with BagWriter(stalled) as out:
-        ch = out.add_topic("/joint_states", "sensor_msgs/msg/JointState", TopicQos())
+        ch = out.add_topic(f"{NS}/joint_states", "sensor_msgs/msg/JointState", TopicQos())
         for k, (_c, m) in enumerate(open_bag(path).messages()):
             out.write(ch, m.data, m.log_time + (1_000_000_000 if k >= 500 else 0))
     lis = Listener(clock=True)

@@ -216,6 +216,9 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = "backwa
                             f"{bag.info.message_count} messages of its complete chunks")
     cfg_topic = "torque_node/config" if output_topic.strip("/") == "joint_torques" else \
         output_topic.strip("/") + "/config"
+    if not output_topic.startswith("/"):  # relative names: in the input topic's namespace
+        ns = stream.topic.rsplit("/", 1)[0]
+        output_topic, cfg_topic = f"{ns}/{output_topic}", f"{ns}/{cfg_topic}"
     config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s, cutoff_hz)
     counts = write_bag(src, dst, res, arm, config, output_topic, cfg_topic, overwrite)
     return res, counts
