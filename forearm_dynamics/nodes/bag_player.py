@@ -20,8 +20,11 @@ Parameters (read at start-up; an invalid one -> one line, exit 2):
   min_subscribers, subscriber_timeout, start_delay, drain: as the trajectory publisher
                   (subscribers counted on the first topic)
 
-Timing: one playback thread sleeps until `busy_wait_us` (0.3 ms) before each message's due
-time and busy-waits the rest (time.sleep alone overshoots by 50-100 us and more under load).
+Timing: one playback thread sleeps until each message's due time; with `busy_wait_us` > 0
+it sleeps until that long before and busy-waits the rest. Measured here
+(benchmarks/bag_player.py, 2 shared cores): busy-waiting 0.3 ms made the p99 interval error
+worse (1.75 vs 1.00 ms at load 3-4, 5.9 vs 3.7 ms at load 6-10): the spinning takes a core
+from the receiving processes. So the default is 0; on a machine with a spare core try 300.
 A message that is late is sent at once (never dropped); lateness is in the summary.
 Progress (elapsed / total) goes to stderr when it is a terminal.
 """
@@ -67,7 +70,7 @@ SPECS = (
     Spec("subscriber_timeout", 10.0, "s to wait for them; then play anyway"),
     Spec("start_delay", 0.5, "s to wait after the subscribers are there (discovery settles)"),
     Spec("drain", 2.0, "s to wait at the end for reliable subscribers to acknowledge"),
-    Spec("busy_wait_us", 300, "us before each due time spent busy-waiting instead of sleeping"),
+    Spec("busy_wait_us", 0, "us before each due time spent busy-waiting instead of sleeping"),
 )
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT,
