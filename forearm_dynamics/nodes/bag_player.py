@@ -253,7 +253,9 @@ class BagPlayer(Node):
                                  f"{pl.duration_ns * scale / 1e9:.2f} s  loop {self.loops + 1}  ")
                 sys.stderr.flush()
         if tty:
-            sys.stderr.write("\n")
+            total = pl.duration_ns * scale / 1e9
+            sys.stderr.write(f"\r{NAME}: {(perf() - start) / 1e9:8.2f} / {total:.2f} s  "
+                             f"loop {self.loops + 1}  \n")
 
     def _finish(self) -> None:
         drain = Duration(nanoseconds=round(self.drain * 1e9))
