@@ -14,6 +14,12 @@ from rosproc import _LOG_DIR, BIN, NodeProcess, ros_env
 #: A namespace of this test session: other sessions on the machine may share the ROS domain
 #: (rosproc.domain_id() is derived from the pid), never this namespace.
 NS = f"/replay_test_{os.getpid()}"
+
+#: The ROS domain of the replay tests: 230..232, which no other test file uses (rosproc
+#: 1..101, faultkit 102..139, test_bag_recorder 140..229). Sessions of other test files on
+#: the same domain were seen to stall these 1 kHz streams (joint runs of the suite on this
+#: shared machine), even in other namespaces.
+DOMAIN = 230 + os.getpid() % 3
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -74,10 +80,11 @@ def write_stream_bag(path: Path, n: int, *, period_ns: int = MS, t0_ns: int = T0
 
 
 def start_player(bag, *ros_args: str) -> NodeProcess:
-    """`bag_player BAG --ros-args ...` (the bag path comes before --ros-args), as rosproc.start."""
+    """`bag_player BAG --ros-args ...` (the bag path comes before --ros-args), as rosproc.start,
+    on the replay tests' DOMAIN."""
     args = [str(BIN / "bag_player"), str(bag), "--ros-args", *ros_args]
     out = Path(tempfile.mkstemp(prefix="bag_player_", suffix=".out", dir=_LOG_DIR)[1])
     err = out.with_suffix(".err")
     with out.open("wb") as fo, err.open("wb") as fe:
-        proc = subprocess.Popen(args, env=ros_env(), stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
+        proc = subprocess.Popen(args, env=ros_env(DOMAIN), stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
     return NodeProcess("bag_player", args, proc, out, err)

@@ -4,6 +4,7 @@ byte for byte, never early, each topic with its recorded QoS; loop, rate, restam
 
 from __future__ import annotations
 
+import itertools
 import struct
 import subprocess
 import time
@@ -11,17 +12,18 @@ import time
 import bagkit
 import numpy as np
 import pytest
-from bagkit import MS, NS, write_stream_bag
+from bagkit import DOMAIN, MS, NS, write_stream_bag
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from rosproc import BIN, Peer, domain_id, ros_env
+from rosproc import BIN, Peer, ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from forearm_dynamics.nodes.common import stream_qos
 
 N = 1500  # 1.5 s at 1 kHz
+_RUNS = itertools.count()
 GAP = 400 * MS  # a silent gap after sample 999: the player must wait it out
 
 
@@ -47,8 +49,12 @@ class Listener:
     writer (`receive` does it): when the player starts, the listening side is ready.
     """
 
-    def __init__(self, topic: str = f"{NS}/joint_states", msg_type=JointState, clock: bool = False):
-        self.peer = Peer("player_listener", domain=domain_id())
+    def __init__(self, topic: str = "joint_states", msg_type=JointState, clock: bool = False):
+        # Each listener has topics of its own (the player is remapped onto them): a reader
+        # left over from an earlier test can then never count as this player's subscriber.
+        self.ns = f"{NS}/run{next(_RUNS)}"
+        topic = f"{self.ns}/{topic}"
+        self.peer = Peer("player_listener", domain=DOMAIN)
         self.got: list[tuple[int, bytes]] = []
         self.clock: list[int] = []
         self.first = (msg_type, topic)
@@ -56,7 +62,7 @@ class Listener:
         self.matched: dict[str, int] = {}  # topic -> publishers matched by this peer's reader
         self.subscribe(msg_type, topic, lambda d: self.got.append((time.perf_counter_ns(), d)), raw=True)
         if clock:
-            self.subscribe(Clock, f"{NS}/clock",
+            self.subscribe(Clock, f"{self.ns}/clock",
                            lambda m: self.clock.append(m.clock.sec * 10**9 + m.clock.nanosec))
 
     def subscribe(self, msg_type, topic: str, callback, qos=None, raw: bool = False) -> None:
@@ -92,18 +98,20 @@ class Listener:
         self.peer.close()
 
 
-def start_player(bag_path, *ros_args: str):
-    """The player, waiting for the listener and its 'go' subscriber (Listener.arm)."""
+def start_player(bag_path, lis: Listener, *ros_args: str):
+    """The player on `lis`'s topics, waiting for it and its 'go' subscriber (Listener.arm)."""
     return bagkit.start_player(bag_path, "-p", "start_delay:=0.2", "-p", "subscriber_timeout:=60.0",
-                               "-p", "min_subscribers:=2", "-r", f"/clock:={NS}/clock", *ros_args)
+                               "-p", "min_subscribers:=2", "-r", f"/clock:={lis.ns}/clock",
+                               "-r", f"{NS}/status:={lis.ns}/status", *ros_args,
+                               "-r", f"{NS}/joint_states:={lis.ns}/joint_states")
 
 
 def test_plays_every_message_in_order_never_early(bag):
     path, written = bag
     lis = Listener()
     status = []
-    lis.subscribe(String, f"{NS}/status", status.append, stream_qos(1000, reliable=False), raw=True)
-    proc = start_player(path, "-p", "topics:=[joint_states, status]")
+    lis.subscribe(String, f"{lis.ns}/status", status.append, stream_qos(1000, reliable=False), raw=True)
+    proc = start_player(path, lis, "-p", "topics:=[joint_states, status]")
     try:
         lis.receive(proc, N)
         assert proc.wait(30) == 0, proc.output()
@@ -132,14 +140,14 @@ def test_plays_every_message_in_order_never_early(bag):
 def test_offered_qos_is_the_recorded_one(bag):
     path, _ = bag
     lis = Listener()
-    proc = start_player(path, "-p", "topics:=[joint_states, status]", "-p", "min_subscribers:=5",
+    proc = start_player(path, lis, "-p", "topics:=[joint_states, status]", "-p", "min_subscribers:=5",
                         "-p", "subscriber_timeout:=60.0")
     try:
         node = lis.peer.node
-        assert lis.peer.spin_until(lambda: node.get_publishers_info_by_topic(f"{NS}/status")
-                                   and node.get_publishers_info_by_topic(f"{NS}/joint_states"), 30), proc.output()
-        status = node.get_publishers_info_by_topic(f"{NS}/status")[0].qos_profile
-        joints = node.get_publishers_info_by_topic(f"{NS}/joint_states")[0].qos_profile
+        assert lis.peer.spin_until(lambda: node.get_publishers_info_by_topic(f"{lis.ns}/status")
+                                   and node.get_publishers_info_by_topic(f"{lis.ns}/joint_states"), 30), proc.output()
+        status = node.get_publishers_info_by_topic(f"{lis.ns}/status")[0].qos_profile
+        joints = node.get_publishers_info_by_topic(f"{lis.ns}/joint_states")[0].qos_profile
     finally:
         proc.stop()
         lis.close()
@@ -150,7 +158,7 @@ def test_offered_qos_is_the_recorded_one(bag):
 def test_rate_scales_time(bag):
     path, written = bag
     lis = Listener()
-    proc = start_player(path, "-p", "rate:=4.0")
+    proc = start_player(path, lis, "-p", "rate:=4.0")
     try:
         lis.receive(proc, N)
         assert proc.wait(30) == 0, proc.output()
@@ -171,7 +179,7 @@ def test_loop_repeats_the_bag(bag, tmp_path):
     short = tmp_path / "short.mcap"
     written = write_stream_bag(short, 200, ns=NS)
     lis = Listener()
-    proc = start_player(short, "-p", "loop:=true")
+    proc = start_player(short, lis, "-p", "loop:=true")
     try:
         lis.receive(proc, 3 * 200 + 10)
         assert proc.running(), proc.output()
@@ -189,7 +197,7 @@ def test_restamp_shifts_stamps_to_now_keeping_spacing(bag):
     path, written = bag
     lis = Listener()
     before = time.time_ns()
-    proc = start_player(path, "-p", "restamp:=true")
+    proc = start_player(path, lis, "-p", "restamp:=true")
     try:
         lis.receive(proc, N)
         assert proc.wait(30) == 0, proc.output()
@@ -209,8 +217,8 @@ def test_restamp_shifts_stamps_to_now_keeping_spacing(bag):
 
 def test_remap(bag):
     path, written = bag
-    lis = Listener(f"{NS}/replayed")
-    proc = start_player(path, "-r", f"{NS}/joint_states:={NS}/replayed")
+    lis = Listener("replayed")
+    proc = start_player(path, lis, "-r", f"{NS}/joint_states:={lis.ns}/replayed")
     try:
         lis.receive(proc, N)
         assert proc.wait(30) == 0, proc.output()
@@ -224,7 +232,7 @@ def test_remap(bag):
 def test_clock(bag):
     path, written = bag
     lis = Listener(clock=True)
-    proc = start_player(path, "-p", "clock:=true", "-p", "timing:=log")
+    proc = start_player(path, lis, "-p", "clock:=true", "-p", "timing:=log")
     try:
         lis.receive(proc, N)
         lis.peer.spin_until(lambda: len(lis.clock) >= N, 10)
@@ -258,7 +266,7 @@ def test_bad_bags_one_line_exit_2(tmp_path, bag, kind):
                 w.write(ch, b"\x00\x01\x00\x00" + bytes(range(k, k + 40)), bagkit.T0 + k)
     elif kind == "truncated_to_nothing":
         path.write_bytes(bag[0].read_bytes()[:30])
-    r = subprocess.run([str(BIN / "bag_player"), str(path), *args], env=ros_env(), capture_output=True,
+    r = subprocess.run([str(BIN / "bag_player"), str(path), *args], env=ros_env(DOMAIN), capture_output=True,
                        text=True, timeout=60, check=False)
     assert r.returncode == 2, r.stdout + r.stderr
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
@@ -276,7 +284,7 @@ def test_truncated_bag_plays_its_complete_chunks(tmp_path):
     data = full.read_bytes()
     cut.write_bytes(data[: len(data) * 2 // 3])
     lis = Listener()
-    proc = start_player(cut)
+    proc = start_player(cut, lis)
     try:
         lis.arm(proc)
         ok = lis.peer.spin_until(lambda: not proc.running(), 60)
@@ -314,7 +322,7 @@ def test_plays_a_bag_written_by_another_rosbag2_writer(tmp_path):
             w.write(conn, t, data)
     assert len(list(out.glob("*.mcap"))) == 1
     lis = Listener()
-    proc = start_player(out)  # the bag directory, as `ros2 bag record` leaves it
+    proc = start_player(out, lis)  # the bag directory, as `ros2 bag record` leaves it
     try:
         lis.receive(proc, 300)
         assert proc.wait(30) == 0, proc.output()
@@ -341,7 +349,7 @@ def test_timing_by_stamp_and_start_offset(tmp_path):
         for k, (_c, m) in enumerate(open_bag(path).messages()):
             out.write(ch, m.data, m.log_time + (1_000_000_000 if k >= 500 else 0))
     lis = Listener(clock=True)
-    proc = start_player(stalled, "-p", "timing:=stamp", "-p", "clock:=true", "-p", "start_offset:=0.2")
+    proc = start_player(stalled, lis, "-p", "timing:=stamp", "-p", "clock:=true", "-p", "start_offset:=0.2")
     try:
         lis.receive(proc, 800)
         lis.peer.spin_until(lambda: len(lis.clock) >= 800, 10)

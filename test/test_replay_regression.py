@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bagkit import NS, start_player
+from bagkit import DOMAIN, NS, start_player
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.highlevel import AnyReader
 from rosproc import BIN, ros_env, start
@@ -42,8 +42,8 @@ def check_bag(*args) -> tuple[subprocess.CompletedProcess, dict]:
 
 def record(bag, *player_cmd) -> None:
     """torque_node + bag_recorder running while `player_cmd` (a started process) plays."""
-    node = start("torque_node", "-r", f"__ns:={NS}")
-    rec = start("bag_recorder", "-p", f"output:={bag}", "-r", f"__ns:={NS}")
+    node = start("torque_node", "-r", f"__ns:={NS}", domain=DOMAIN)
+    rec = start("bag_recorder", "-p", f"output:={bag}", "-r", f"__ns:={NS}", domain=DOMAIN)
     player = None
     try:
         assert node.wait_for_output("config on", 30), node.output()
@@ -72,10 +72,11 @@ def torques(path, topic=f"{NS}/joint_torques") -> dict[int, np.ndarray]:
 def bags(tmp_path_factory):
     d = tmp_path_factory.mktemp("replay")
     baseline, new = d / "baseline.mcap", d / "new.mcap"
-    record(baseline, start, "trajectory_publisher", "-r", f"__ns:={NS}", "-p", f"movements:={MOVEMENTS}", "-p", f"rate_hz:={RATE_HZ}.0",
-           "-p", "start_delay:=2.0", "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=30.0")
+    record(baseline, lambda *a: start(*a, domain=DOMAIN), "trajectory_publisher", "-r", f"__ns:={NS}",
+           "-p", f"movements:={MOVEMENTS}", "-p", f"rate_hz:={RATE_HZ}.0",
+           "-p", "start_delay:=5.0", "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=30.0")
     record(new, start_player, baseline, "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=30.0",
-           "-p", "start_delay:=2.0", "-p", "rate:=0.5")
+           "-p", "start_delay:=5.0", "-p", "rate:=0.5")
     return baseline, new
 
 
