@@ -26,7 +26,8 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
 from ..dynamics import ArmModel
-from ..estimation.offline import backward_batch, zero_phase
+from ..estimation import make_estimator
+from ..estimation.offline import backward_batch, segments, zero_phase
 from ..nodes.jointstate_cdr import OutputTemplate
 from .errors import BagError
 from .jointstream import JointStream, read_joint_stream
@@ -100,8 +101,6 @@ def compute(stream: JointStream, arm: ArmModel, estimator: str = "backward",
     elif has_v.all() or not has_v.any():
         qd, qdd, _warm = backward_batch(t, q, stream.velocity[idx] if has_v.all() else None, settings, gap)
     else:  # velocities in some messages only: the estimator sample by sample, as the node
-        from ..estimation import make_estimator
-
         est = make_estimator("backward", arm.nv, settings or {})
         qd, qdd = np.zeros_like(q), np.zeros_like(q)
         last = None
@@ -113,8 +112,6 @@ def compute(stream: JointStream, arm: ArmModel, estimator: str = "backward",
             qd[k], qdd[k] = est.qd, est.qdd
     tau = arm.inverse_dynamics_batch(q, qd, qdd)
     elapsed = time.perf_counter() - start
-    from ..estimation.offline import segments
-
     return OfflineResult(t, stream.log_ns[idx], [stream.frame_ids[i] for i in idx], q, qd, qdd, tau,
                          dropped, len(segments(t, gap)), warnings, elapsed)
 
@@ -133,8 +130,6 @@ def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Pa
             cutoff_hz if cutoff_hz is not None else analysis_config()["filter"]["cutoff_hz"])},
             "lag_s": {"q": 0.0, "qd": 0.0, "qdd": 0.0}, "offline": True}
     else:
-        from ..estimation import make_estimator
-
         desc = make_estimator("backward", arm.nv, settings or {}).describe(1e-3)
     return {"node": "bag_torques", "version": package_version(), **model_config(arm, None),
             "estimator": desc, "input_topic": input_topic, "output_topic": output_topic,
