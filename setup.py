@@ -17,6 +17,10 @@ EXECUTABLES = {
     "trajectory_publisher": "forearm_dynamics.nodes.trajectory_publisher:main",
     "bag_recorder": "forearm_dynamics.nodes.bag_recorder:main",
     "null_echo_node": "forearm_dynamics.nodes.null_echo_node:main",
+    "bag_player": "forearm_dynamics.nodes.bag_player:main",
+    "bag_torques": "forearm_dynamics.cli.bag_torques:main",
+    "mot_to_bag": "forearm_dynamics.cli.mot_to_bag:main",
+    "bag_export": "forearm_dynamics.cli.bag_export:main",
 }
 
 setup(
@@ -43,6 +47,7 @@ setup(
         "ros-jazzy-diagnostic-msgs",
         "ros-jazzy-builtin-interfaces",
         "ros-jazzy-rcl-interfaces",
+        "ros-jazzy-rosgraph-msgs",
     ],
     extras_require={
         "plots": ["matplotlib>=3.7"],

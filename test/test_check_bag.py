@@ -317,7 +317,6 @@ def test_corrupt_files_exit_2_with_one_line(tmp_path, good_bag, case) -> None:
 
 @pytest.mark.parametrize(("run", "needle"), [
     (Run(torques=False, movements=(1,)), "no joint_torques"),
-    (Run(markers=False, movements=(1,)), "no movement markers"),
 ])
 def test_foreign_bags_exit_2(tmp_path, reference, run, needle, capsys) -> None:
     bag = tmp_path / "foreign.mcap"
@@ -325,6 +324,16 @@ def test_foreign_bags_exit_2(tmp_path, reference, run, needle, capsys) -> None:
     code, text = _check(bag, reference, capsys=capsys)
     assert code == 2
     assert needle in text and len(text.strip().splitlines()) == 1
+
+
+def test_run_without_markers_is_scored_as_one_segment(tmp_path, reference, capsys) -> None:
+    """No markers (any recording): not refused any more, analysed against its own filtered
+    positions (bag/score.py; details in test_check_markerless.py)."""
+    bag = tmp_path / "nomarkers.mcap"
+    write_run(bag, Run(markers=False, movements=(1,)))
+    code, text = _check(bag, reference, capsys=capsys)
+    assert code == 0, text
+    assert "no movement markers: one segment" in text
 
 
 def test_garbage_payloads_exit_2(tmp_path, reference, capsys) -> None:

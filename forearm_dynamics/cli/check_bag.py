@@ -12,9 +12,13 @@ Exit codes (forearm_dynamics.exit_codes) mean correctness, not speed:
             default): otherwise it is reported against its target with the load average.
   2 (USAGE) the bag cannot be analysed (missing, empty, not MCAP, truncated before the
             first complete chunk, a damaged chunk in an indexed bag, no joint_torques,
-            torques without the model's joints, no movement markers or none of a known
+            torques without the model's joints, markers of no known
             movement), or a bad argument: one line, no traceback.
-A truncated bag that still holds data is analysed, with a warning.
+A truncated bag that still holds data is analysed, with a warning. A bag without movement
+markers (any recording) is scored as one segment against its own filtered positions
+(bag/score.py: reported, gated only on loss and non-finite torques); `--baseline OLD`
+compares two runs' torques stamp by stamp (bag/regression.py: exit 1 above --tolerance or
+on any unmatched sample).
 
 The --json report (NRMSE values are fractions there: 0.01 = 1 %; times in ms or ns as named):
   bag          path, complete, problem, messages, topics {topic: count}
@@ -77,6 +81,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--max-latency-p99-ms", type=float, metavar="MS", default=None,
                     help="exit 1 if the one-way latency p99 exceeds MS (default: report only, "
                          "or latency_p99_ms_max from the thresholds file)")
+    ap.add_argument("--baseline", type=Path, metavar="OLD",
+                    help="regression: compare joint_torques with OLD's, stamp by stamp")
+    ap.add_argument("--tolerance", type=float, default=1e-6, metavar="NM",
+                    help="with --baseline: largest allowed |difference| (N·m, default 1e-6)")
     return ap.parse_args(argv)
 
 
@@ -242,9 +250,41 @@ def _recover(src: Path, dst: Path) -> int:
     return OK
 
 
+def _regression(args: argparse.Namespace) -> int:
+    from ..bag import regression
+
+    rep = regression.compare(args.bag, args.baseline, args.tolerance)
+    code = DATA if rep.failures else OK
+    print("\n".join(regression.format_report(rep)))
+    if args.json is not None:
+        args.json.write_text(json.dumps({**regression.to_dict(rep), "exit_code": code}, indent=1),
+                             encoding="utf-8")
+    return code
+
+
+def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> int:
+    from ..bag import score
+
+    if rec.joint_states is None or len(rec.joint_states) == 0:
+        raise BagError("foreign", f"{args.bag}: no movement markers and no joint_states: "
+                       "nothing to compute a reference from")
+    if not info.complete:
+        rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
+                            f"{info.message_count} messages of its complete chunks")
+    report = score.analyse_markerless(rec, choice, th)
+    code = DATA if report.failures else OK
+    print("\n".join(score.format_score(report, info)))
+    if args.json is not None:
+        args.json.write_text(json.dumps({**score.score_dict(report), "exit_code": code}, indent=1),
+                             encoding="utf-8")
+    return code
+
+
 def run(args: argparse.Namespace) -> int:
     if args.recover is not None:
         return _recover(args.bag, args.recover)
+    if args.baseline is not None:
+        return _regression(args)
     th = Thresholds.load(args.thresholds)
     if args.max_latency_p99_ms is not None:
         if not args.max_latency_p99_ms > 0:
@@ -272,9 +312,8 @@ def run(args: argparse.Namespace) -> int:
                        f"built ({exc})") from None
     rec = read_recording(bag, choice.arm.joint_names)
     rec.warnings[:0] = config_warnings
-    if not rec.markers:
-        raise BagError("foreign", f"{args.bag}: no movement markers on the movement topic; "
-                       "cannot split the run into movements")
+    if not rec.markers:  # any recording (a subject's session): scored as one segment
+        return _markerless(args, rec, choice, th, info)
     if not any(_known_movement(m.id) for m in rec.markers):
         ids = sorted({m.id for m in rec.markers})
         raise BagError("foreign", f"{args.bag}: no movement marker names a known movement (ids "

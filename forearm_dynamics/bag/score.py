@@ -1,0 +1,193 @@
+"""check_bag for any recording: a run without movement markers scored as one segment.
+
+A subject's session (or a replay of real data) has no analytic trajectory to compare
+with, so the reference is the offline practice of biomechanics: the recorded joint_states
+positions filtered at 6 Hz zero-phase (analysis.filtering, config/analysis.yaml), velocity
+and acceleration as derivatives of the filtered signal (estimation/offline.zero_phase),
+inverse dynamics with the model the bag's config names. The recorded joint_torques are
+compared with it at the same stamps:
+
+- per DOF: RMSE (N·m) and NRMSE = RMSE / peak-to-peak of the reference (DOFs whose
+  peak-to-peak is under analysis.yaml ptp_floor_nm are left out and counted);
+- torque lag (ms, positive = recorded torques late) per DOF, by cross-correlation of the
+  mean-removed series within +-max_lag, refined by a parabola through the peak; the
+  median over the DOFs that move is the headline;
+- delivery (loss, latency, rate), as with markers (check.delivery).
+
+The difference mixes the node's causal estimate (lag, noise) with the filter's smoothing:
+it is reported, not gated. Verdicts (exit 1): lost samples beyond check.yaml loss_max, and
+torques that are not finite.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..analysis.errors import rmse
+from ..analysis.filtering import analysis_config
+from ..estimation.offline import zero_phase
+from .check import Delivery, Thresholds, delivery
+from .decode import Recording
+from .model_config import ModelChoice
+
+MAX_LAG_S = 0.2
+
+
+@dataclass
+class ScoreReport:
+    model: ModelChoice
+    joint_names: tuple[str, ...]
+    samples: int  # joint_torques matched to a joint_states stamp
+    duration_s: float
+    cutoff_hz: float
+    rmse: np.ndarray  # (J,) N·m
+    nrmse: np.ndarray  # (J,) NaN where left out
+    left_out: int
+    lag_ms: np.ndarray  # (J,) NaN where left out
+    lag_median_ms: float
+    delivery: Delivery
+    warnings: list[str]
+    failures: list[str] = field(default_factory=list)
+
+
+def lag_by_xcorr(rec: np.ndarray, ref: np.ndarray, dt: float, max_lag_s: float = MAX_LAG_S) -> float:
+    """Delay (s) of `rec` behind `ref` (uniformly sampled at dt): argmax of their
+    cross-correlation within +-max_lag, refined by a parabola; NaN if flat."""
+    a, b = rec - rec.mean(), ref - ref.mean()
+    if not (np.any(a) and np.any(b)):
+        return float("nan")
+    n = len(a)
+    m = min(int(max_lag_s / dt), n - 2)
+    if m < 1:
+        return float("nan")
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    c = np.fft.irfft(np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft)), nfft)
+    c = np.concatenate([c[-m:], c[:m + 1]])  # lags -m..m: c[k] = sum a[i+k] b[i]
+    k = int(np.argmax(c))
+    frac = 0.0
+    if 0 < k < len(c) - 1:
+        y0, y1, y2 = c[k - 1], c[k], c[k + 1]
+        den = y0 - 2 * y1 + y2
+        frac = 0.5 * (y0 - y2) / den if den != 0 else 0.0
+    return (k - m + frac) * dt
+
+
+def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
+                       cutoff_hz: float | None = None) -> ScoreReport:
+    arm, names = choice.arm, choice.arm.joint_names
+    states, torques = rec.joint_states, rec.joint_torques
+    warnings = list(rec.warnings) + list(choice.warnings)
+    cutoff = float(cutoff_hz if cutoff_hz is not None else analysis_config()["filter"]["cutoff_hz"])
+    floor = float(analysis_config()["ptp_floor_nm"])
+    nan = np.full(len(names), np.nan)
+    d = delivery(states, torques, th.tail_grace_s)
+    report = ScoreReport(choice, names, 0, 0.0, cutoff, nan, nan, 0, nan, float("nan"), d, warnings)
+    # reference at the joint_states stamps (ordered, unique, complete positions)
+    order = np.argsort(states.stamp_ns, kind="stable")
+    s_t, s_q = states.stamp_ns[order], states.position[order]
+    keep = np.isfinite(s_q).all(axis=1) & np.concatenate([[True], np.diff(s_t) > 0])
+    if (~keep).any():
+        warnings.append(f"{int((~keep).sum())} joint_states without every joint's position "
+                        "(or with a repeated stamp) left out of the reference")
+    s_t, s_q = s_t[keep], s_q[keep]
+    if len(s_t) < 10:
+        warnings.append(f"only {len(s_t)} usable joint_states: no reference computed")
+        report.failures = _verdicts(report, th)
+        return report
+    gap = max(int(10 * np.median(np.diff(s_t))), 100_000_000)
+    q, qd, qdd = zero_phase(s_t, s_q, cutoff, gap)
+    ref = arm.inverse_dynamics_batch(q, qd, qdd)
+    t_u, it = np.unique(torques.stamp_ns, return_index=True)
+    common, ia, ib = np.intersect1d(s_t, t_u, assume_unique=True, return_indices=True)
+    report.samples = len(common)
+    if len(common) < 10:
+        warnings.append(f"only {len(common)} joint_torques answer a joint_states stamp: nothing to compare")
+        report.failures = _verdicts(report, th)
+        return report
+    r, x = ref[ia], torques.effort[it[ib]]
+    report.duration_s = (common[-1] - common[0]) / 1e9
+    err = rmse(x, r)
+    ptp = np.ptp(r, axis=0)
+    moving = ptp >= floor
+    report.rmse = np.where(np.isfinite(err), err, np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        report.nrmse = np.where(moving, report.rmse / ptp, np.nan)
+    report.left_out = int((~moving).sum())
+    dt = float(np.median(np.diff(common))) / 1e9
+    grid = common[0] + np.round(np.arange(0, common[-1] - common[0] + 1, dt * 1e9)).astype(np.int64)
+    lags = np.full(len(names), np.nan)
+    finite = np.isfinite(x).all(axis=1)
+    for j in np.flatnonzero(moving):
+        xs = np.interp(grid, common[finite], x[finite, j])
+        rs = np.interp(grid, common, r[:, j])
+        lags[j] = lag_by_xcorr(xs, rs, dt) * 1e3
+    report.lag_ms = lags
+    if np.isfinite(lags).any():
+        report.lag_median_ms = float(np.nanmedian(lags))
+    report.failures = _verdicts(report, th)
+    return report
+
+
+def _verdicts(report: ScoreReport, th: Thresholds) -> list[str]:
+    out = []
+    d = report.delivery
+    if d.lost > th.loss_max:
+        out.append(f"lost {d.lost} joint_states without joint_torques ({d.loss_pct:.2f} %) "
+                   f"> {th.loss_max}")
+    bad = [n for n, e in zip(report.joint_names, report.rmse, strict=True) if e == np.inf]
+    if bad:
+        out.append(f"joint_torques effort not finite (or missing) for {', '.join(bad[:4])}")
+    return out
+
+
+def _num(x: float, fmt: str) -> str:
+    return "-" if x is None or not np.isfinite(x) else format(x, fmt)
+
+
+def format_score(report: ScoreReport, bag_info) -> list[str]:
+    lat, d = report.delivery.latency_ms, report.delivery
+    lines = [(f"{bag_info.path}: {bag_info.message_count} messages, no movement markers: one segment "
+             f"of {report.duration_s:.2f} s ({report.samples} samples); model {report.model.describe()}"),
+             *(f"warning: {w}" for w in report.warnings),
+             (f"reference: joint_states positions low-passed at {report.cutoff_hz:g} Hz zero-phase, "
+             "derivatives of the filtered signal, inverse dynamics"),
+             f"{'DOF':<22} {'RMSE N·m':>10} {'NRMSE':>8} {'lag ms':>8}"]
+    for j, n in enumerate(report.joint_names):
+        lines.append(f"{n:<22} {_num(report.rmse[j], '.4f'):>10} {_num(report.nrmse[j], '.4f'):>8} "
+                     f"{_num(report.lag_ms[j], '.2f'):>8}")
+    lines.append(f"torque lag (median over {int(np.isfinite(report.lag_ms).sum())} moving DOFs): "
+                 f"{_num(report.lag_median_ms, '.2f')} ms; {report.left_out} DOF(s) left out "
+                 "(peak-to-peak under the floor)")
+    lines.append(
+        f"delivery: joint_states {d.joint_states} ({_num(d.rate_hz.get('joint_states', np.nan), '.1f')} Hz), "
+        f"joint_torques {d.joint_torques} ({_num(d.rate_hz.get('joint_torques', np.nan), '.1f')} Hz); "
+        f"lost {d.lost} of {d.considered} ({_num(d.loss_pct, '.3f')} %); latency p50 "
+        f"{_num(lat.get('p50', np.nan), '.3f')} ms, p99 {_num(lat.get('p99', np.nan), '.3f')} ms")
+    lines += [f"FAIL: {f}" for f in report.failures]
+    lines.append("PASS" if not report.failures else f"FAIL ({len(report.failures)} problem(s))")
+    return lines
+
+
+def score_dict(report: ScoreReport) -> dict:
+    names = report.joint_names
+    d = report.delivery
+
+    def clean(v):
+        return float(v) if np.isfinite(v) else None
+
+    return {
+        "mode": "markerless",
+        "model": {"kind": report.model.arm.kind, "body_size": report.model.arm.body_size.label,
+                  "source": report.model.source},
+        "samples": report.samples, "duration_s": report.duration_s, "cutoff_hz": report.cutoff_hz,
+        "rmse_nm": {n: clean(v) for n, v in zip(names, report.rmse, strict=True)},
+        "nrmse": {n: clean(v) for n, v in zip(names, report.nrmse, strict=True)},
+        "lag_ms": {n: clean(v) for n, v in zip(names, report.lag_ms, strict=True)},
+        "lag_median_ms": clean(report.lag_median_ms), "left_out": report.left_out,
+        "delivery": {"joint_states": d.joint_states, "joint_torques": d.joint_torques,
+                     "considered": d.considered, "lost": d.lost, "loss_pct": clean(d.loss_pct),
+                     "latency_ms": d.latency_ms, "rate_hz": d.rate_hz},
+        "warnings": report.warnings, "failures": report.failures,
+    }

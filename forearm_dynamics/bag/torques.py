@@ -1,0 +1,219 @@
+"""bag_torques' work: joint torques for every joint_states sample of a bag, in batch.
+
+The samples go through the torque node's stamp rules (stream_node.py): a stamp that does
+not increase by more than `max_stamp_gap` backwards is dropped (counted), a step larger
+than `max_stamp_gap` either way starts a new segment (the estimator warms up again).
+Estimators: 'backward' (the node's, estimation/offline.backward_batch: same numbers as a
+torque_node given the same stream) or 'zero_phase' (offline: 6 Hz forward-backward
+low-pass, derivatives of the filtered positions). Torques: ArmModel.inverse_dynamics_batch.
+
+The output bag holds every message of the input (same channels, QoS, log times) plus
+`joint_torques` (JointState in the model's joint order: position, velocity as used, effort;
+header copied from the input; log time = the input's) and a `torque_node/config` JSON like
+the node's, naming model, body size and estimator, so check_bag can rebuild the model.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from rclpy.serialization import serialize_message
+from std_msgs.msg import String
+
+from ..dynamics import ArmModel
+from ..estimation import make_estimator
+from ..estimation.offline import backward_batch, segments, zero_phase
+from ..nodes.jointstate_cdr import OutputTemplate
+from .errors import BagError
+from .jointstream import JointStream, read_joint_stream
+from .reader import open_bag
+from .recover import _custom_data
+from .rosbag2_meta import ROSBAG2_METADATA, TopicQos
+from .writer import BagWriter
+
+ESTIMATORS = ("backward", "zero_phase")
+
+
+@dataclass
+class OfflineResult:
+    stamps_ns: np.ndarray
+    log_ns: np.ndarray
+    frame_ids: list[str]
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    dropped: int = 0  # samples the node's stamp rules reject
+    segments: int = 1
+    warnings: list[str] = field(default_factory=list)
+    compute_s: float = 0.0
+
+
+def stamp_rules(stamps_ns: np.ndarray, max_gap_ns: int) -> np.ndarray:
+    """Mask of the samples a torque node keeps: zero stamps and stamps that do not advance
+    (within max_gap backwards: duplicates, reordering) are dropped; larger jumps are kept."""
+    s = np.asarray(stamps_ns, np.int64)
+    keep = s > 0
+    d = np.diff(s)
+    if keep.all() and (d > 0).all():
+        return keep
+    last = None
+    for i in range(len(s)):
+        if not keep[i]:
+            continue
+        if last is not None and -max_gap_ns <= s[i] - last <= 0:
+            keep[i] = False
+            continue
+        last = s[i]
+    return keep
+
+
+def compute(stream: JointStream, arm: ArmModel, estimator: str = "backward",
+            settings: dict | None = None, max_gap_s: float = 0.1,
+            cutoff_hz: float | None = None) -> OfflineResult:
+    """Torques of every kept sample; BagError when a joint of the model is never given."""
+    if estimator not in ESTIMATORS:
+        raise BagError("usage", f"estimator must be one of {', '.join(ESTIMATORS)}, got {estimator!r}")
+    missing = [n for j, n in enumerate(arm.joint_names) if not np.isfinite(stream.position[:, j]).any()]
+    if missing:
+        raise BagError("foreign", f"{stream.topic} has no position for {', '.join(missing[:4])}"
+                       f"{' ...' if len(missing) > 4 else ''}: not this model's joints")
+    gap = round(max_gap_s * 1e9)
+    keep = stamp_rules(stream.stamp_ns, gap)
+    finite = np.isfinite(stream.position).all(axis=1)
+    warnings = []
+    if not finite.all():
+        warnings.append(f"{int((~finite).sum())} samples without a finite position for every "
+                        "joint dropped (as the node rejects them)")
+    keep &= finite
+    dropped = int((~keep).sum())
+    idx = np.flatnonzero(keep)
+    t, q = stream.stamp_ns[idx], stream.position[idx]
+    has_v = stream.has_velocity[idx]
+    start = time.perf_counter()
+    if estimator == "zero_phase":
+        q, qd, qdd = zero_phase(t, q, cutoff_hz, gap)
+    elif has_v.all() or not has_v.any():
+        qd, qdd, _warm = backward_batch(t, q, stream.velocity[idx] if has_v.all() else None, settings, gap)
+    else:  # velocities in some messages only: the estimator sample by sample, as the node
+        est = make_estimator("backward", arm.nv, settings or {})
+        qd, qdd = np.zeros_like(q), np.zeros_like(q)
+        last = None
+        for k in range(len(t)):
+            if last is not None and not 0 < t[k] - last <= gap:
+                est.reset()
+            last = t[k]
+            est.update(int(t[k]), q[k], stream.velocity[idx[k]] if has_v[k] else None)
+            qd[k], qdd[k] = est.qd, est.qdd
+    tau = arm.inverse_dynamics_batch(q, qd, qdd)
+    elapsed = time.perf_counter() - start
+    return OfflineResult(t, stream.log_ns[idx], [stream.frame_ids[i] for i in idx], q, qd, qdd, tau,
+                         dropped, len(segments(t, gap)), warnings, elapsed)
+
+
+def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Path,
+                   input_topic: str, output_topic: str, max_gap_s: float,
+                   cutoff_hz: float | None) -> dict:
+    """What the torque node states on torque_node/config, for an offline run."""
+    from ..nodes.common import package_version
+    from ..nodes.torque_node import model_config
+
+    if estimator == "zero_phase":
+        from ..analysis.filtering import analysis_config
+
+        desc = {"method": "zero_phase", "settings": {"cutoff_hz": float(
+            cutoff_hz if cutoff_hz is not None else analysis_config()["filter"]["cutoff_hz"])},
+            "lag_s": {"q": 0.0, "qd": 0.0, "qdd": 0.0}, "offline": True}
+    else:
+        desc = make_estimator("backward", arm.nv, settings or {}).describe(1e-3)
+    return {"node": "bag_torques", "version": package_version(), **model_config(arm, None),
+            "estimator": desc, "input_topic": input_topic, "output_topic": output_topic,
+            "max_stamp_gap": max_gap_s, "source_bag": str(src)}
+
+
+def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: dict,
+              output_topic: str = "joint_torques", config_topic: str = "torque_node/config",
+              overwrite: bool = False) -> dict[str, int]:
+    """Every message of src plus output_topic and config_topic; returns counts per topic."""
+    bag = open_bag(src)
+    info = bag.info
+    for topic in (output_topic, config_topic):
+        if (ch := info.find_topic(topic)) is not None:
+            raise BagError("exists", f"{src} already has {ch.topic}; choose another with --topic "
+                           f"(e.g. {output_topic}_offline)")
+    writer = BagWriter(dst, overwrite=overwrite, custom_data=_custom_data(info.metadata))
+    try:
+        for name, data in info.metadata:
+            if name != ROSBAG2_METADATA:
+                writer.add_metadata(name, data)
+        ids: dict[int, int] = {}
+        for ch in sorted(info.channels.values(), key=lambda c: c.id):
+            sid = writer.add_schema(ch.schema_name, ch.schema_encoding, ch.schema_data) \
+                if ch.schema_name else 0
+            ids[ch.id] = writer.add_channel(ch.topic, sid, ch.schema_name, ch.metadata,
+                                            ch.message_encoding)
+        out = writer.add_topic("/" + output_topic.strip("/"), "sensor_msgs/msg/JointState",
+                               TopicQos(depth=1000))
+        cfg = writer.add_topic("/" + config_topic.strip("/"), "std_msgs/msg/String",
+                               TopicQos(depth=1, durability="transient_local"))
+        first_log = int(res.log_ns.min()) if len(res.log_ns) else info.start_ns
+        writer.write(cfg, serialize_message(String(data=json.dumps(config))), first_log)
+        templates: dict[str, OutputTemplate] = {}
+
+        def emit(k: int) -> None:
+            tpl = templates.get(res.frame_ids[k])
+            if tpl is None:
+                tpl = templates[res.frame_ids[k]] = OutputTemplate(arm.joint_names, res.frame_ids[k])
+            tpl.q[:] = res.q[k]
+            tpl.qd[:] = res.qd[k]
+            tpl.effort[:] = res.tau[k]
+            tpl.pack_stamp(*divmod(int(res.stamps_ns[k]), 1_000_000_000))
+            writer.write(out, tpl.payload(), int(res.log_ns[k]))
+
+        k, n = 0, len(res.stamps_ns)
+        # interleave: each output right after its input (both carry the input's log time)
+        for ch, msg in bag.messages():
+            writer.write(ids[ch.id], msg.data, msg.log_time, msg.publish_time, msg.sequence)
+            while k < n and res.log_ns[k] <= msg.log_time:
+                emit(k)
+                k += 1
+        for rest in range(k, n):
+            emit(rest)
+        writer.close()
+    except BaseException:
+        writer.abort()
+        if not overwrite:
+            try:
+                os.unlink(dst)
+            except OSError:
+                pass
+        raise
+    return writer.counts()
+
+
+def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = "backward",
+                settings: dict | None = None, input_topic: str = "joint_states",
+                output_topic: str = "joint_torques", max_gap_s: float = 0.1,
+                cutoff_hz: float | None = None, overwrite: bool = False) -> tuple[OfflineResult, dict]:
+    src, dst = Path(src), Path(dst)
+    if dst.exists() and src.resolve() == dst.resolve():
+        raise BagError("exists", f"{dst}: the output must be another file than the input")
+    bag = open_bag(src)
+    stream = read_joint_stream(bag, input_topic, arm.joint_names)
+    res = compute(stream, arm, estimator, settings, max_gap_s, cutoff_hz)
+    if not bag.info.complete:
+        res.warnings.insert(0, f"{src} is truncated ({bag.info.problem}); using the "
+                            f"{bag.info.message_count} messages of its complete chunks")
+    cfg_topic = "torque_node/config" if output_topic.strip("/") == "joint_torques" else \
+        output_topic.strip("/") + "/config"
+    if not output_topic.startswith("/"):  # relative names: in the input topic's namespace
+        ns = stream.topic.rsplit("/", 1)[0]
+        output_topic, cfg_topic = f"{ns}/{output_topic}", f"{ns}/{cfg_topic}"
+    config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s, cutoff_hz)
+    counts = write_bag(src, dst, res, arm, config, output_topic, cfg_topic, overwrite)
+    return res, counts

@@ -1,0 +1,108 @@
+"""bag_export BAG --format csv|sto: joint_torques (and states) as CSV or an OpenSim table.
+
+    bag_export BAG --format csv|sto [--out FILE] [--topic joint_torques] [--states]
+               [--names ours|opensim] [--map config/opensim_coordinates.yaml]
+
+One row per joint_torques message, in stamp order. Columns: `time` (s; for a bag made by
+mot_to_bag the source file's own time, else from the first stamp), `stamp_ns` (CSV only),
+`<joint>_moment` (N·m) per joint, and with --states `<joint>` (rad) and `<joint>_speed`
+(rad/s): the state the torques were computed for. `.sto` is what OpenSim's Inverse
+Dynamics tool writes (header, `inDegrees=no`, `endheader`, tab-separated), readable by
+OpenSim's tools; `--names opensim` labels columns with the MoBL-ARMS/ARMS coordinate names
+of config/opensim_coordinates.yaml (moments and states in the OpenSim coordinate's sign).
+Exit 0 written, 2 bad input (one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..bag import BagError, open_bag
+from ..bag.jointstream import read_joint_stream
+from ..bag.opensim import CoordinateMap, MotionError, write_table
+from ..description import JOINT_NAMES
+from ..exit_codes import OK, USAGE
+from .common import die
+from .mot_to_bag import METADATA
+
+PROG = "bag_export"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    ap.add_argument("bag", type=Path)
+    ap.add_argument("--format", choices=("csv", "sto"), required=True)
+    ap.add_argument("--out", type=Path, default=None, help="output file (default BAG with .csv/.sto)")
+    ap.add_argument("--topic", default="joint_torques")
+    ap.add_argument("--states", action="store_true", help="also the joint positions and velocities")
+    ap.add_argument("--names", choices=("ours", "opensim"), default="ours")
+    ap.add_argument("--map", type=Path, default=None, metavar="YAML")
+    ap.add_argument("--overwrite", action="store_true")
+    return ap.parse_args(argv)
+
+
+def _source_start(bag) -> int | None:
+    for name, data in bag.info.metadata:
+        if name == METADATA and "start_ns" in data:
+            try:
+                return int(json.loads(data["start_ns"]))
+            except (ValueError, TypeError):
+                return None
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    out = args.out or args.bag.with_suffix("." + args.format)
+    if out.exists() and not args.overwrite:
+        return die(f"{PROG}: error: {out} exists already; refusing to overwrite it (--overwrite)", USAGE)
+    bag = open_bag(args.bag)
+    s = read_joint_stream(bag, args.topic, JOINT_NAMES, effort=True)
+    if not np.isfinite(s.effort).any(axis=0).all():
+        missing = [j for j, ok in zip(JOINT_NAMES, np.isfinite(s.effort).any(axis=0), strict=True) if not ok]
+        raise BagError("foreign", f"{args.bag}: {s.topic} carries no effort for {', '.join(missing[:4])}"
+                       f"{' ...' if len(missing) > 4 else ''}: not joint torques of this model")
+    order = np.argsort(s.stamp_ns, kind="stable")
+    stamps = s.stamp_ns[order]
+    start = _source_start(bag)
+    t = (stamps - (start if start is not None else stamps[0])) / 1e9
+    names, signs = list(JOINT_NAMES), np.ones(len(JOINT_NAMES))
+    if args.names == "opensim":
+        cmap = CoordinateMap.load(args.map)
+        pairs = [cmap.opensim_name(j) for j in JOINT_NAMES]
+        names, signs = [p[0] for p in pairs], np.array([p[1] for p in pairs])
+    labels = [f"{n}_moment" for n in names]
+    cols = [s.effort[order] * signs]
+    if args.states:
+        labels += names + [f"{n}_speed" for n in names]
+        cols += [s.position[order] * signs, s.velocity[order] * signs]
+    data = np.hstack(cols)
+    if args.format == "csv":
+        write_table(out, "", labels, t, data, sep=",", opensim=False, stamps_ns=stamps)
+    else:
+        write_table(out, "Inverse Dynamics Generalized Forces (forearm_dynamics bag_export)", labels, t, data)
+    print(f"{PROG}: {len(stamps)} rows of {s.topic} ({len(labels)} columns) -> {out}")
+    if not bag.info.complete:
+        print(f"{PROG}: warning: {args.bag} is truncated ({bag.info.problem}); exported its complete chunks",
+              file=sys.stderr)
+    return OK
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        return run(args)
+    except (BagError, MotionError) as exc:
+        return die(f"{PROG}: error: {exc}", USAGE)
+    except (OSError, ValueError) as exc:
+        return die(f"{PROG}: error: {exc}", USAGE)
+    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
+        return die(f"{PROG}: error: {args.bag}: cannot export ({type(exc).__name__}: {exc})", USAGE)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

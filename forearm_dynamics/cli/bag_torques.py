@@ -1,0 +1,89 @@
+"""bag_torques IN OUT: joint torques for every joint_states of a bag, offline, in batch.
+
+    bag_torques IN.mcap OUT.mcap [--model segmented] [--body-size 50 | 1.80,75]
+                [--estimator backward|zero_phase] [--accel-cutoff HZ] [--velocity-cutoff HZ]
+                [--cutoff HZ] [--max-stamp-gap S] [--input-topic T] [--topic T] [--overwrite]
+
+OUT holds every message of IN plus `joint_torques` and a `torque_node/config` naming the
+model and estimator (so `check_bag OUT` rebuilds the same model). 'backward' is the torque
+node's estimator (same numbers as the node given the same stream); 'zero_phase' the
+offline practice (6 Hz forward-backward low-pass, derivatives of the filtered positions).
+Exit codes: 0 written; 2 bad arguments or an input that cannot be used (one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..bag import BagError
+from ..bag.torques import ESTIMATORS, bag_torques
+from ..builders import MODEL_KINDS
+from ..dynamics import build_model
+from ..exit_codes import OK, USAGE
+from .common import body_size_arg, die
+
+PROG = "bag_torques"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    ap.add_argument("input", type=Path, help="bag with joint_states (any rosbag2 MCAP)")
+    ap.add_argument("output", type=Path, help="new bag to write (refused if it exists)")
+    ap.add_argument("--model", default="segmented", choices=MODEL_KINDS)
+    ap.add_argument("--body-size", type=body_size_arg, default=50,
+                    help="percentile 5, 50, 95 or stature_m,body_mass_kg (default 50)")
+    ap.add_argument("--estimator", default="backward", choices=ESTIMATORS)
+    ap.add_argument("--accel-cutoff", type=float, default=0.0, metavar="HZ",
+                    help="backward: first-order low-pass on qdd (0 = off, as the node's default)")
+    ap.add_argument("--velocity-cutoff", type=float, default=0.0, metavar="HZ",
+                    help="backward: low-pass on velocities estimated from positions (0 = off)")
+    ap.add_argument("--cutoff", type=float, default=None, metavar="HZ",
+                    help="zero_phase: low-pass cutoff (default config/analysis.yaml, 6 Hz)")
+    ap.add_argument("--max-stamp-gap", type=float, default=0.1, metavar="S",
+                    help="stamp steps beyond this restart the estimator (the node's max_stamp_gap)")
+    ap.add_argument("--input-topic", default="joint_states")
+    ap.add_argument("--topic", default="joint_torques", help="output topic")
+    ap.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    return ap.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        arm = build_model(args.model, args.body_size)
+    except ValueError as exc:
+        return die(f"{PROG}: error: --body-size/--model: {exc}", USAGE)
+    settings = {"accel_cutoff_hz": args.accel_cutoff, "velocity_cutoff_hz": args.velocity_cutoff}
+    if args.estimator == "zero_phase" and (args.accel_cutoff or args.velocity_cutoff):
+        return die(f"{PROG}: error: --accel-cutoff/--velocity-cutoff belong to the backward "
+                   "estimator; zero_phase takes --cutoff", USAGE)
+    res, counts = bag_torques(args.input, args.output, arm, estimator=args.estimator,
+                              settings=settings, input_topic=args.input_topic, output_topic=args.topic,
+                              max_gap_s=args.max_stamp_gap, cutoff_hz=args.cutoff,
+                              overwrite=args.overwrite)
+    for w in res.warnings:
+        print(f"{PROG}: warning: {w}", file=sys.stderr)
+    n = len(res.stamps_ns)
+    rate = n / res.compute_s if res.compute_s > 0 else float("inf")
+    print(f"{PROG}: {n} samples ({res.dropped} dropped by the stamp rules, {res.segments} "
+          f"segment(s)), model {arm.kind} {arm.body_size.label}, estimator {args.estimator}: "
+          f"computed in {res.compute_s:.3f} s ({rate:,.0f} samples/s); wrote "
+          f"{sum(counts.values())} messages to {args.output}")
+    return OK
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        return run(args)
+    except BagError as exc:
+        return die(f"{PROG}: error: {exc}", USAGE)
+    except (OSError, ValueError) as exc:
+        return die(f"{PROG}: error: {exc}", USAGE)
+    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
+        return die(f"{PROG}: error: {args.input}: cannot compute ({type(exc).__name__}: {exc})", USAGE)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

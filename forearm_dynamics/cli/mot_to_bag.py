@@ -1,0 +1,110 @@
+"""mot_to_bag MOTION.mot OUT.mcap: an OpenSim motion or states file as a joint_states bag.
+
+    mot_to_bag MOTION.mot|STATES.sto OUT.mcap [--start SEC] [--in-degrees yes|no]
+               [--map config/opensim_coordinates.yaml] [--topic joint_states] [--overwrite]
+
+Columns are mapped by coordinate name through config/opensim_coordinates.yaml (MoBL-ARMS
+and ARMS hand names -> our joints, with sign and offset); angles in degrees or radians as
+the header's inDegrees says; any sample rate. Joints the file does not give are held at
+the map's posture; columns that map to nothing are listed (not modelled / unknown). Each
+row becomes one JointState stamped start + time (log time = stamp), velocities from a
+states file's speeds when every mapped coordinate has one. The bag records where it came
+from (metadata 'forearm_dynamics/mot_to_bag': source, start_ns, mapping), which bag_export
+uses to write the file's own time column back. Exit 0 written, 2 bad input (one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+
+from ..bag import BagError, BagWriter, TopicQos
+from ..bag.jointstream import tidy
+from ..bag.opensim import CoordinateMap, MotionError, map_motion, read_motion
+from ..description import JOINT_NAMES
+from ..exit_codes import OK, USAGE
+from .common import die
+
+PROG = "mot_to_bag"
+METADATA = "forearm_dynamics/mot_to_bag"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    ap.add_argument("motion", type=Path, help="OpenSim .mot (motion) or .sto (states) file")
+    ap.add_argument("output", type=Path, help="MCAP bag to write (refused if it exists)")
+    ap.add_argument("--start", type=float, default=None, metavar="SEC",
+                    help="stamp of time 0, s since the epoch (default: now, to the ms)")
+    ap.add_argument("--in-degrees", choices=("yes", "no"), default=None,
+                    help="override (or supply) the header's inDegrees")
+    ap.add_argument("--map", type=Path, default=None, metavar="YAML",
+                    help="coordinate map (default: the package's config/opensim_coordinates.yaml)")
+    ap.add_argument("--topic", default="joint_states")
+    ap.add_argument("--frame-id", default="")
+    ap.add_argument("--overwrite", action="store_true")
+    return ap.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    cmap = CoordinateMap.load(args.map)
+    deg = None if args.in_degrees is None else args.in_degrees == "yes"
+    motion = read_motion(args.motion, deg)
+    mm = map_motion(motion, cmap)
+    start_ns = round((time.time() if args.start is None else args.start) * 1e3) * 1_000_000
+    stamps = [start_ns + round(float(t) * 1e9) for t in mm.time]
+    if stamps[0] <= 0:
+        return die(f"{PROG}: error: time {mm.time[0]:g} s with --start {start_ns / 1e9:g} gives a "
+                   "stamp <= 0 (stamp 0 means 'missing' to the torque node); give a later --start", USAGE)
+    info = {"source": str(args.motion), "kind": motion.kind, "in_degrees": motion.in_degrees,
+            "start_ns": start_ns, "mapped": mm.mapped, "held_rad": mm.held,
+            "not_modelled": mm.not_modelled, "unknown": mm.unknown}
+    with BagWriter(args.output, overwrite=args.overwrite) as w:
+        w.add_metadata(METADATA, {k: json.dumps(v) for k, v in info.items()})
+        ch = w.add_topic("/" + args.topic.strip("/"), "sensor_msgs/msg/JointState", TopicQos(depth=1000))
+        msg = JointState()
+        msg.header.frame_id = args.frame_id
+        msg.name = list(JOINT_NAMES)
+        for k, stamp in enumerate(stamps):
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            msg.position = mm.q[k].tolist()
+            msg.velocity = [] if mm.qd is None else mm.qd[k].tolist()
+            w.write(ch, tidy(serialize_message(msg)), stamp)
+    dt = float(mm.time[-1] - mm.time[0]) / max(len(mm.time) - 1, 1)
+    print(f"{PROG}: {len(stamps)} rows of {motion.kind} file {args.motion} ("
+          f"{'degrees' if motion.in_degrees else 'radians'}, {1 / dt if dt > 0 else 0:.1f} Hz, "
+          f"{mm.time[-1] - mm.time[0]:.3f} s) -> {args.output} ({args.topic}"
+          f"{', with velocities' if mm.qd is not None else ''})")
+    print(f"  mapped ({len(mm.mapped)}): " + ", ".join(f"{c} -> {j}" if c != j else j
+                                                       for j, c in mm.mapped.items()))
+    if mm.held:
+        print(f"  held at the map's posture ({len(mm.held)}): "
+              + ", ".join(f"{j} {v:g} rad" for j, v in mm.held.items()))
+    if mm.not_modelled:
+        print(f"  not modelled, not used ({len(mm.not_modelled)}): {', '.join(mm.not_modelled)}")
+    if mm.unknown:
+        print(f"  unknown columns, not used ({len(mm.unknown)}): {', '.join(mm.unknown)}")
+    for note in mm.notes:
+        print(f"  note: {note}")
+    return OK
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        return run(args)
+    except (MotionError, BagError) as exc:
+        return die(f"{PROG}: error: {exc}", USAGE)
+    except (OSError, ValueError, KeyError) as exc:
+        return die(f"{PROG}: error: {exc}", USAGE)
+    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
+        return die(f"{PROG}: error: {args.motion}: cannot convert ({type(exc).__name__}: {exc})", USAGE)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
