@@ -21,7 +21,8 @@ paper's zero-phase 6 Hz filter, config/analysis.yaml, on the positions + central
 differences on the real times; not causal).
 Extra rows: 1 kHz with noisy velocities (ENCODER_NOISE_DEG on positions, VEL_NOISE_DPS on
 velocities, both Gaussian: an encoder with a differentiated or tachometer velocity), 100 Hz
-with jittered stamps and dropped samples, and the exact input of trajectory_publisher (1 kHz, exact velocities).
+with jittered stamps and dropped samples, and the exact input of trajectory_publisher (1 kHz,
+exact velocities).
 
 Writes the `estimation` key of benchmarks/results.json (other keys untouched) and
 benchmarks/estimation.png.

@@ -10,6 +10,11 @@ from pathlib import Path
 import numpy as np
 from rclpy.serialization import serialize_message
 from rosproc import _LOG_DIR, BIN, NodeProcess, ros_env
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from forearm_dynamics import JOINT_NAMES
+from forearm_dynamics.bag import BagWriter, TopicQos
 
 #: A namespace of this test session: other sessions on the machine may share the ROS domain
 #: (rosproc.domain_id() is derived from the pid), never this namespace.
@@ -20,11 +25,6 @@ NS = f"/replay_test_{os.getpid()}"
 #: the same domain were seen to stall these 1 kHz streams (joint runs of the suite on this
 #: shared machine), even in other namespaces.
 DOMAIN = 230 + os.getpid() % 3
-from sensor_msgs.msg import JointState
-from std_msgs.msg import String
-
-from forearm_dynamics import JOINT_NAMES
-from forearm_dynamics.bag import BagWriter, TopicQos
 
 MS = 1_000_000
 T0 = 1_700_000_000_000_000_000

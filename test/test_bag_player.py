@@ -145,7 +145,8 @@ def test_offered_qos_is_the_recorded_one(bag):
     try:
         node = lis.peer.node
         assert lis.peer.spin_until(lambda: node.get_publishers_info_by_topic(f"{lis.ns}/status")
-                                   and node.get_publishers_info_by_topic(f"{lis.ns}/joint_states"), 30), proc.output()
+                                   and node.get_publishers_info_by_topic(f"{lis.ns}/joint_states"),
+                                   30), proc.output()
         status = node.get_publishers_info_by_topic(f"{lis.ns}/status")[0].qos_profile
         joints = node.get_publishers_info_by_topic(f"{lis.ns}/joint_states")[0].qos_profile
     finally:

@@ -88,7 +88,8 @@ def test_mot_to_bag(tmp_path, kind, suffix, degrees):
     r = run("mot_to_bag", src, bag, "--start", START)
     assert r.returncode == 0, r.stderr
     stamps, pos, vel = read_states(bag)
-    np.testing.assert_array_equal(stamps, np.round(START * 1e3) * 1_000_000 + np.round(t * 1e9).astype(np.int64))
+    expected = np.round(START * 1e3) * 1_000_000 + np.round(t * 1e9).astype(np.int64)
+    np.testing.assert_array_equal(stamps, expected)
     a = angles(t)
     for c, j in MAPPED.items():
         np.testing.assert_allclose(pos[:, JOINT_NAMES.index(j)], a[c], rtol=0, atol=1e-12)
@@ -136,7 +137,8 @@ def test_round_trip_mot_bag_torques_sto(tmp_path):
     r = run("bag_export", tq, "--format", "sto", "--out", tmp_path / "os.sto", "--names", "opensim")
     assert r.returncode == 0, r.stderr
     labels = read_motion(tmp_path / "os.sto").labels
-    assert {"elbow_flexion_moment", "flexion_moment", "deviation_moment", "2mcp_flexion_moment"} <= set(labels)
+    assert {"elbow_flexion_moment", "flexion_moment", "deviation_moment",
+            "2mcp_flexion_moment"} <= set(labels)
     r = run("bag_export", tq, "--format", "csv", "--out", tmp_path / "tq.csv")
     assert r.returncode == 0, r.stderr
     lines = (tmp_path / "tq.csv").read_text().splitlines()

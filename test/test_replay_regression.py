@@ -97,7 +97,8 @@ def test_replay_is_identical_to_the_baseline(bags):
 def test_bag_torques_reproduces_the_node(bags, tmp_path):
     baseline, _ = bags
     out = tmp_path / "offline.mcap"
-    r = subprocess.run([str(BIN / "bag_torques"), str(baseline), str(out), "--topic", "joint_torques_offline"],
+    r = subprocess.run([str(BIN / "bag_torques"), str(baseline), str(out),
+                        "--topic", "joint_torques_offline"],
                        env=ros_env(), capture_output=True, text=True, timeout=120, check=False)
     assert r.returncode == 0, r.stderr
     node, offline = torques(out), torques(out, f"{NS}/joint_torques_offline")

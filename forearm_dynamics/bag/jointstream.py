@@ -58,7 +58,8 @@ def read_joint_stream(bag: Bag, topic: str, joint_names: tuple[str, ...],
         raise BagError("foreign", f"{bag.path}: no {topic} topic (topics: "
                        f"{', '.join(sorted(bag.info.topic_counts())) or 'none'})")
     if not ch.schema_name.endswith("JointState"):
-        raise BagError("foreign", f"{bag.path}: {ch.topic} is {ch.schema_name}, not sensor_msgs/msg/JointState")
+        raise BagError("foreign",
+                       f"{bag.path}: {ch.topic} is {ch.schema_name}, not sensor_msgs/msg/JointState")
     nj = len(joint_names)
     plans: list[tuple] = []  # (layout, idx, ok, has_v, frame)
     plan_of: dict[tuple[int, bytes], int] = {}

@@ -140,7 +140,8 @@ class CoordinateMap:
             joint = spec["joint"]
             if joint not in JOINT_NAMES:
                 raise MotionError(f"{path}: coordinate {name} maps to unknown joint {joint!r}")
-            coords[str(name)] = (joint, float(spec.get("sign", 1)), math.radians(float(spec.get("offset_deg", 0))))
+            coords[str(name)] = (joint, float(spec.get("sign", 1)),
+                                 math.radians(float(spec.get("offset_deg", 0))))
         for j in JOINT_NAMES:  # our own names map to themselves
             coords.setdefault(j, (j, 1.0, 0.0))
         hold = {str(k): math.radians(float(v)) for k, v in (cfg.get("hold_posture_deg") or {}).items()}

@@ -11,7 +11,8 @@ Steady-state gains: the gain of the converged filter depends only on (dt, r, r_v
 same for every joint, so an update is two small matrix products on the stacked state
 X = [q; qd; qdd] (3, n): X = F X (predict), X += K E (correct with the innovations E).
 Gains come from the discrete algebraic Riccati equation (scipy.linalg.solve_discrete_are)
-and are cached by dt bucket (4 % wide, log scale) and noise bucket (12 % wide): a jittered stream reuses a handful of gains, a dropped
+and are cached by dt bucket (4 % wide, log scale) and noise bucket (12 % wide): a jittered
+stream reuses a handful of gains, a dropped
 sample (one 2 dt step) gets the gain of its own dt, and nothing is solved per sample once
 the buckets are filled. Start (and after a reset): q = the first sample, qd = 0 (or the
 given velocity), qdd = 0, steady-state gains from the first step: a stream that starts at
