@@ -113,8 +113,10 @@ class TorqueHarness:
     def __init__(self, procs: Procs, *node_args: str, reply_depth: int = 20000,
                  peer_name: str = "fault_peer"):
         self.domain = private_domain()
-        self.proc = procs.start("torque_node", "-p", "diagnostics_period:=0.2", *node_args,
-                                domain=self.domain)
+        # the backward estimator: its outputs are exactly known, so "the next good sample is
+        # exact" can be checked to 1e-8 (the default estimator: test_torque_node.py)
+        self.proc = procs.start("torque_node", "-p", "diagnostics_period:=0.2",
+                                "-p", "estimator:=backward", *node_args, domain=self.domain)
         self.peer = rosproc.Peer(peer_name, domain=self.domain)
         node = self.peer.node
         self.pub = node.create_publisher(JointState, "joint_states", stream_qos(1000))

@@ -49,7 +49,7 @@ def src(tmp_path_factory):
 def test_backward_equals_inverse_dynamics_of_the_node_estimate(src, tmp_path):
     path, written = src
     out = tmp_path / "out.mcap"
-    r = run(path, out, "--body-size", "95")
+    r = run(path, out, "--body-size", "95", "--estimator", "backward")
     assert r.returncode == 0, r.stderr
     got = read(out)
     assert got["topics"]["/joint_states"] == N and got["topics"]["/status"] == N // 10
@@ -141,3 +141,41 @@ def test_bad_input_one_line_exit_2(src, tmp_path, case):
         assert out.read_text() == "keep me"
     elif case != "missing":
         assert not out.exists()
+
+
+def test_the_default_is_the_nodes_estimator_sample_by_sample(src, tmp_path):
+    """Without --estimator: the node's default estimator (DEFAULT_ESTIMATOR), its update()
+    sample by sample, q and qd as it estimates them (what the node computes with)."""
+    from forearm_dynamics.estimation import DEFAULT_ESTIMATOR
+
+    path, written = src
+    out = tmp_path / "default.mcap"
+    r = run(path, out, "--setting", "kalman_jerk_psd=1000" if DEFAULT_ESTIMATOR == "kalman"
+            else "x=1")
+    if DEFAULT_ESTIMATOR != "kalman":
+        assert r.returncode == 2 and "x" in r.stderr
+        return
+    assert r.returncode == 0, r.stderr
+    got = read(out)
+    assert got["config"]["estimator"]["method"] == "kalman"
+    assert got["config"]["estimator"]["settings"]["kalman_jerk_psd"] == 1000.0
+    est = make_estimator("kalman", 20, {"kalman_jerk_psd": 1000.0})
+    q, qd, qdd, _ = est.run(written["stamps"], written["q"], written["qd"])
+    eff = np.array([t[4] for t in got["torques"]])
+    np.testing.assert_allclose(eff, build_model("segmented", 50).inverse_dynamics(q, qd, qdd),
+                               rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(np.array([t[2] for t in got["torques"]]), q)
+    # and it is not the backward estimator's
+    assert np.abs(eff - build_model("segmented", 50).inverse_dynamics(
+        written["q"], written["qd"], np.zeros_like(qd))).max() > 1e-6
+
+
+def test_bad_estimator_settings_are_one_line(src, tmp_path):
+    path, _ = src
+    for args, word in ((["--setting", "kalman_jerk_psd"], "NAME=VALUE"),
+                       (["--setting", "no_such=1"], "no_such"),
+                       (["--estimator", "zero_phase", "--setting", "kalman_jerk_psd=1"], "zero_phase"),
+                       (["--estimator", "kalman", "--accel-cutoff", "5"], "backward")):
+        r = run(path, tmp_path / "x.mcap", *args)
+        assert r.returncode == 2 and word in r.stderr, (args, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr

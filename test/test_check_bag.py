@@ -20,8 +20,8 @@ from std_msgs.msg import String
 
 from forearm_dynamics import build_model, get_movement
 from forearm_dynamics.bag import BagWriter, TopicQos
+from forearm_dynamics.bag.model_config import model_config
 from forearm_dynamics.cli.check_bag import main as check_bag
-from forearm_dynamics.nodes.torque_config import model_config
 from forearm_dynamics.paths import config_file
 from forearm_dynamics.reference import save_reference
 

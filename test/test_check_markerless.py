@@ -15,7 +15,7 @@ from std_msgs.msg import String
 
 from forearm_dynamics import build_model
 from forearm_dynamics.bag import BagWriter, TopicQos
-from forearm_dynamics.nodes.torque_node import model_config
+from forearm_dynamics.bag.model_config import model_config
 
 N = 8000  # 8 s at 1 kHz
 
@@ -53,7 +53,7 @@ def write_session(path, lag_s: float = 0.0, lose: int = 0, torque_size: int = 95
         jt = w.add_topic("/joint_torques", "sensor_msgs/msg/JointState")
         cfg = w.add_topic("/torque_node/config", "std_msgs/msg/String",
                           TopicQos(depth=1, durability="transient_local"))
-        w.write(cfg, serialize_message(String(data=json.dumps(model_config(named, None)))), int(stamps[0]))
+        w.write(cfg, serialize_message(String(data=json.dumps(model_config(named)))), int(stamps[0]))
         for k in range(N):
             w.write(js, joint_state(int(stamps[k]), q[k], qd[k]), int(stamps[k]) + 100_000)
             if not (3000 <= k < 3000 + lose):

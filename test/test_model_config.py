@@ -11,13 +11,9 @@ import numpy as np
 import pytest
 
 from forearm_dynamics import build_model
-from forearm_dynamics.bag.model_config import config_in_force, model_from_config
+from forearm_dynamics.bag.model_config import config_in_force, model_config, model_from_config
 from forearm_dynamics.nodes.params import ParameterError
-from forearm_dynamics.nodes.torque_config import (
-    ModelRequest,
-    build_bundle,
-    model_config,
-)
+from forearm_dynamics.nodes.torque_config import ModelRequest, build_bundle
 
 RNG = np.random.default_rng(5)
 Q, QD, QDD = (RNG.uniform(-1, 1, 20) for _ in range(3))

@@ -107,13 +107,14 @@ def test_mot_to_bag(tmp_path, kind, suffix, degrees):
 
 
 def test_round_trip_mot_bag_torques_sto(tmp_path):
-    """.mot (degrees, 200 Hz) -> bag -> bag_torques (node estimator, positions only) -> .sto:
-    the .sto's times are the .mot's, its moments inverse_dynamics of the same states."""
+    """.mot (degrees, 200 Hz) -> bag -> bag_torques (backward estimator, positions only) -> .sto:
+    the .sto's times are the .mot's, its moments inverse_dynamics of the same states
+    (computed here by hand: the backward estimator's numbers are exactly known)."""
     src = tmp_path / "walk.mot"
     t = write_file(src, "motion", degrees=True)
     bag, tq, sto = tmp_path / "q.mcap", tmp_path / "tq.mcap", tmp_path / "tq.sto"
     assert run("mot_to_bag", src, bag, "--start", START).returncode == 0
-    r = run("bag_torques", bag, tq, "--body-size", "5")
+    r = run("bag_torques", bag, tq, "--body-size", "5", "--estimator", "backward")
     assert r.returncode == 0, r.stderr
     r = run("bag_export", tq, "--format", "sto", "--out", sto, "--states")
     assert r.returncode == 0, r.stderr
@@ -123,7 +124,7 @@ def test_round_trip_mot_bag_torques_sto(tmp_path):
     q = np.zeros((len(t), 20))
     for c, j in MAPPED.items():
         q[:, JOINT_NAMES.index(j)] = angles(t)[c]
-    # backward differences by hand (the node's estimator, positions only: 2 warm-up samples)
+    # backward differences by hand (positions only: 2 warm-up samples)
     dt = np.diff(t)[:, None]
     qd = np.vstack([np.zeros(20), np.diff(q, axis=0) / dt])
     qd[0] = 0

@@ -10,6 +10,8 @@ the first output computed with it; 0 = from the start; null = built, not applied
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
@@ -159,3 +161,29 @@ def config_in_force(configs: Sequence[tuple[int, dict]], stamp_ns: int) -> dict 
         if key is None or k >= key:
             best, key = cfg, k
     return best
+
+
+def _placement(arm: ArmModel) -> dict | None:
+    """The pro/sup placement that was built (None for the anatomical model): name, split,
+    split rule, axis offsets (m, at this body size) and cylinder, as the core reports it."""
+    return None if arm.placement is None else arm.placement.as_dict()
+
+
+def model_config(arm: ArmModel) -> dict:
+    """The model part of the config message: exactly what was built (model_from_config
+    reads it back, strictly). Written here beside its reader so the two cannot drift.."""
+    payload = None
+    if arm.payload is not None:
+        payload = arm.payload.as_dict()
+    out = {
+        "schema": CONFIG_SCHEMA,
+        "model": arm.kind,
+        "body_size": dataclasses.asdict(arm.body_size),
+        "side": arm.side,
+        "payload": payload,
+        "placement": _placement(arm),
+        "joint_names": list(arm.joint_names),
+    }
+    if any(isinstance(x, float) and not math.isfinite(x) for x in out["body_size"].values()):
+        raise ValueError("body size scale factors are not finite")
+    return out

@@ -3,8 +3,10 @@
 The samples go through the torque node's stamp rules (stream_node.py): a stamp that does
 not increase by more than `max_stamp_gap` backwards is dropped (counted), a step larger
 than `max_stamp_gap` either way starts a new segment (the estimator warms up again).
-Estimators: 'backward' (the node's, estimation/offline.backward_batch: same numbers as a
-torque_node given the same stream) or 'zero_phase' (offline: 6 Hz forward-backward
+Estimators: any of the torque node's (estimation.ESTIMATORS, default the node's default):
+the same update() calls the node makes, sample by sample, so the same numbers as a
+torque_node given the same stream ('backward' through estimation/offline.backward_batch,
+vectorised, bit for bit the same), or 'zero_phase' (offline: 6 Hz forward-backward
 low-pass, derivatives of the filtered positions). Torques: ArmModel.inverse_dynamics_batch.
 
 The output bag holds every message of the input (same channels, QoS, log times) plus
@@ -26,7 +28,8 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
 from ..dynamics import ArmModel
-from ..estimation import make_estimator
+from ..estimation import DEFAULT_ESTIMATOR, make_estimator
+from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, segments, zero_phase
 from ..nodes.jointstate_cdr import OutputTemplate
 from .errors import BagError
@@ -36,7 +39,8 @@ from .recover import _custom_data
 from .rosbag2_meta import ROSBAG2_METADATA, TopicQos
 from .writer import BagWriter
 
-ESTIMATORS = ("backward", "zero_phase")
+#: The node's estimators, then the offline zero-phase one.
+ESTIMATORS = (*NODE_ESTIMATORS, "zero_phase")
 
 
 @dataclass
@@ -73,7 +77,7 @@ def stamp_rules(stamps_ns: np.ndarray, max_gap_ns: int) -> np.ndarray:
     return keep
 
 
-def compute(stream: JointStream, arm: ArmModel, estimator: str = "backward",
+def compute(stream: JointStream, arm: ArmModel, estimator: str = DEFAULT_ESTIMATOR,
             settings: dict | None = None, max_gap_s: float = 0.1,
             cutoff_hz: float | None = None) -> OfflineResult:
     """Torques of every kept sample; BagError when a joint of the model is never given."""
@@ -98,18 +102,18 @@ def compute(stream: JointStream, arm: ArmModel, estimator: str = "backward",
     start = time.perf_counter()
     if estimator == "zero_phase":
         q, qd, qdd = zero_phase(t, q, cutoff_hz, gap)
-    elif has_v.all() or not has_v.any():
+    elif estimator == "backward" and (has_v.all() or not has_v.any()):
         qd, qdd, _warm = backward_batch(t, q, stream.velocity[idx] if has_v.all() else None, settings, gap)
-    else:  # velocities in some messages only: the estimator sample by sample, as the node
-        est = make_estimator("backward", arm.nv, settings or {})
-        qd, qdd = np.zeros_like(q), np.zeros_like(q)
+    else:  # the estimator sample by sample, as the node: q and qd as it estimates them
+        est = make_estimator(estimator, arm.nv, settings or {})
+        q, qd, qdd = q.copy(), np.zeros_like(q), np.zeros_like(q)
         last = None
         for k in range(len(t)):
             if last is not None and not 0 < t[k] - last <= gap:
                 est.reset()
             last = t[k]
             est.update(int(t[k]), q[k], stream.velocity[idx[k]] if has_v[k] else None)
-            qd[k], qdd[k] = est.qd, est.qdd
+            q[k], qd[k], qdd[k] = est.q, est.qd, est.qdd
     tau = arm.inverse_dynamics_batch(q, qd, qdd)
     elapsed = time.perf_counter() - start
     return OfflineResult(t, stream.log_ns[idx], [stream.frame_ids[i] for i in idx], q, qd, qdd, tau,
@@ -121,7 +125,7 @@ def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Pa
                    cutoff_hz: float | None) -> dict:
     """What the torque node states on torque_node/config, for an offline run."""
     from ..nodes.common import package_version
-    from ..nodes.torque_node import model_config
+    from .model_config import model_config
 
     if estimator == "zero_phase":
         from ..analysis.filtering import analysis_config
@@ -130,8 +134,8 @@ def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Pa
             cutoff_hz if cutoff_hz is not None else analysis_config()["filter"]["cutoff_hz"])},
             "lag_s": {"q": 0.0, "qd": 0.0, "qdd": 0.0}, "offline": True}
     else:
-        desc = make_estimator("backward", arm.nv, settings or {}).describe(1e-3)
-    return {"node": "bag_torques", "version": package_version(), **model_config(arm, None),
+        desc = make_estimator(estimator, arm.nv, settings or {}).describe(1e-3)
+    return {"node": "bag_torques", "version": package_version(), **model_config(arm),
             "estimator": desc, "input_topic": input_topic, "output_topic": output_topic,
             "max_stamp_gap": max_gap_s, "source_bag": str(src)}
 
@@ -196,7 +200,7 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
     return writer.counts()
 
 
-def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = "backward",
+def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT_ESTIMATOR,
                 settings: dict | None = None, input_topic: str = "joint_states",
                 output_topic: str = "joint_torques", max_gap_s: float = 0.1,
                 cutoff_hz: float | None = None, overwrite: bool = False) -> tuple[OfflineResult, dict]:

@@ -1,13 +1,16 @@
 """bag_torques IN OUT: joint torques for every joint_states of a bag, offline, in batch.
 
     bag_torques IN.mcap OUT.mcap [--model segmented] [--body-size 50 | 1.80,75]
-                [--estimator backward|zero_phase] [--accel-cutoff HZ] [--velocity-cutoff HZ]
+                [--estimator kalman|butterworth|savgol|backward|zero_phase]
+                [--setting NAME=VALUE ...] [--accel-cutoff HZ] [--velocity-cutoff HZ]
                 [--cutoff HZ] [--max-stamp-gap S] [--input-topic T] [--topic T] [--overwrite]
 
 OUT holds every message of IN plus `joint_torques` and a `torque_node/config` naming the
-model and estimator (so `check_bag OUT` rebuilds the same model). 'backward' is the torque
-node's estimator (same numbers as the node given the same stream); 'zero_phase' the
-offline practice (6 Hz forward-backward low-pass, derivatives of the filtered positions).
+model and estimator (so `check_bag OUT` rebuilds the same model). The torque node's
+estimators (default: the node's default) give the same numbers as the node given the same
+stream; `--setting NAME=VALUE` sets one of the estimator's settings (the node's
+`estimator.NAME`). 'zero_phase' is the offline practice (6 Hz forward-backward low-pass,
+derivatives of the filtered positions).
 Exit codes: 0 written; 2 bad arguments or an input that cannot be used (one line).
 """
 
@@ -21,6 +24,7 @@ from ..bag import BagError
 from ..bag.torques import ESTIMATORS, bag_torques
 from ..builders import MODEL_KINDS
 from ..dynamics import build_model
+from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..exit_codes import OK, USAGE
 from .common import body_size_arg, die
 
@@ -34,7 +38,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--model", default="segmented", choices=MODEL_KINDS)
     ap.add_argument("--body-size", type=body_size_arg, default=50,
                     help="percentile 5, 50, 95 or stature_m,body_mass_kg (default 50)")
-    ap.add_argument("--estimator", default="backward", choices=ESTIMATORS)
+    ap.add_argument("--estimator", default=DEFAULT_ESTIMATOR, choices=ESTIMATORS,
+                    help=f"default {DEFAULT_ESTIMATOR} (the torque node's default)")
+    ap.add_argument("--setting", action="append", default=[], metavar="NAME=VALUE",
+                    help="an estimator setting (the node's estimator.NAME), e.g. "
+                         "kalman_jerk_psd=3000; repeatable")
     ap.add_argument("--accel-cutoff", type=float, default=0.0, metavar="HZ",
                     help="backward: first-order low-pass on qdd (0 = off, as the node's default)")
     ap.add_argument("--velocity-cutoff", type=float, default=0.0, metavar="HZ",
@@ -54,10 +62,27 @@ def run(args: argparse.Namespace) -> int:
         arm = build_model(args.model, args.body_size)
     except ValueError as exc:
         return die(f"{PROG}: error: --body-size/--model: {exc}", USAGE)
-    settings = {"accel_cutoff_hz": args.accel_cutoff, "velocity_cutoff_hz": args.velocity_cutoff}
-    if args.estimator == "zero_phase" and (args.accel_cutoff or args.velocity_cutoff):
-        return die(f"{PROG}: error: --accel-cutoff/--velocity-cutoff belong to the backward "
-                   "estimator; zero_phase takes --cutoff", USAGE)
+    settings: dict[str, float] = {}
+    for item in args.setting:
+        name, sep, value = item.partition("=")
+        try:
+            settings[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            return die(f"{PROG}: error: --setting {item!r}: give NAME=VALUE (a number)", USAGE)
+    if args.accel_cutoff or args.velocity_cutoff:
+        if args.estimator != "backward":
+            return die(f"{PROG}: error: --accel-cutoff/--velocity-cutoff belong to the backward "
+                       "estimator (zero_phase takes --cutoff, the others --setting)", USAGE)
+        settings.update(accel_cutoff_hz=args.accel_cutoff, velocity_cutoff_hz=args.velocity_cutoff)
+    if args.estimator == "zero_phase" and settings:
+        return die(f"{PROG}: error: zero_phase takes --cutoff, not estimator settings", USAGE)
+    if args.estimator != "zero_phase":
+        try:
+            make_estimator(args.estimator, 1, settings)
+        except ValueError as exc:
+            return die(f"{PROG}: error: --setting: {exc}", USAGE)
     res, counts = bag_torques(args.input, args.output, arm, estimator=args.estimator,
                               settings=settings, input_topic=args.input_topic, output_topic=args.topic,
                               max_gap_s=args.max_stamp_gap, cutoff_hz=args.cutoff,

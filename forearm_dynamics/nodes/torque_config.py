@@ -11,8 +11,6 @@ sample computed with it (`applies_from_stamp_ns`).
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -22,7 +20,7 @@ import pinocchio as pin
 import yaml
 
 from ..anthropometry import DIMENSIONS, resolve_body_size
-from ..bag.model_config import CONFIG_SCHEMA
+from ..bag.model_config import model_config
 from ..builders import MODEL_KINDS
 from ..dynamics import ArmModel, build_model
 from ..estimation import (
@@ -226,29 +224,3 @@ def build_bundle(request: ModelRequest, config_id: int, n: int,
     ms = (time.perf_counter() - t0) * 1e3
     return ModelBundle(config_id, request, arm, arm.model, arm.data, est,
                        model_config(arm), ms)
-
-
-def _placement(arm: ArmModel) -> dict | None:
-    """The pro/sup placement that was built (None for the anatomical model): name, split,
-    split rule, axis offsets (m, at this body size) and cylinder, as the core reports it."""
-    return None if arm.placement is None else arm.placement.as_dict()
-
-
-def model_config(arm: ArmModel) -> dict:
-    """The model part of the config message: exactly what was built (bag/model_config.py
-    reads it back, strictly)."""
-    payload = None
-    if arm.payload is not None:
-        payload = arm.payload.as_dict()
-    out = {
-        "schema": CONFIG_SCHEMA,
-        "model": arm.kind,
-        "body_size": dataclasses.asdict(arm.body_size),
-        "side": arm.side,
-        "payload": payload,
-        "placement": _placement(arm),
-        "joint_names": list(arm.joint_names),
-    }
-    if any(isinstance(x, float) and not math.isfinite(x) for x in out["body_size"].values()):
-        raise ValueError("body size scale factors are not finite")
-    return out

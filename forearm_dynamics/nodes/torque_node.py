@@ -128,7 +128,10 @@ class TorqueNode(JointStreamNode):
         est = b.estimator
         if reset:
             est.reset()
-        warm = est.update(t_ns, self.q, self.qd if velocity_given else None)
+        try:
+            warm = est.update(t_ns, self.q, self.qd if velocity_given else None)
+        except ValueError as exc:  # the estimator refuses a sample (state unchanged)
+            raise v.Rejection(v.NON_FINITE, str(exc)) from None
         self._velocity_given = velocity_given
         if self.output_rate_hz > 0:  # the timer publishes; keep the estimate at t_ns
             a_q, a_qd, a_qdd = self._anchor
@@ -139,8 +142,10 @@ class TorqueNode(JointStreamNode):
             self._state_t_ns = t_ns
             self._last_in_ns = _time_ns()
             return None
-        if not velocity_given:
-            np.copyto(self.qd, est.qd)
+        # the state as estimated (a filtering estimator smooths q and qd too): the torque is
+        # computed from it and the output message states it ("position and velocity as used")
+        np.copyto(self.q, est.q)
+        np.copyto(self.qd, est.qd)
         tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh
