@@ -54,7 +54,7 @@ if __package__ in (None, ""):  # `python benchmarks/torque_node_rate.py` from th
 
 from benchmarks.stats import loadavg, machine_info, merge_results, percentiles, write_json
 from forearm_dynamics.exit_codes import DATA, OK
-from forearm_dynamics.processes import Child, ros_env
+from forearm_dynamics.processes import Child, proc_stat, ros_env
 
 MS = 1_000_000
 RATE_HZ = 1000.0
@@ -171,7 +171,9 @@ def measure_rate(domain: int, work: Path, seconds: float) -> dict:
         time.sleep(0.5)
         sent: list[int] = []
         n = int(seconds * 100)
+        cpu0, t_cpu0 = proc_stat(child.pid), time.monotonic()
         feed(pub, time.time_ns() + 100 * MS, 10 * MS, n, state, sent)
+        cpu1, t_cpu1 = proc_stat(child.pid), time.monotonic()
         time.sleep(1.0)
     finally:
         peer.close()
@@ -194,6 +196,8 @@ def measure_rate(domain: int, work: Path, seconds: float) -> dict:
         "repeated_values": same_values,
         "outputs_after_last_input": int((stamps > sent[-1]).sum()),
         "latency_ms": percentiles(recv - stamps, 1e-6),
+        "node_cpu_percent": (100 * (cpu1.cpu_s - cpu0.cpu_s) / (t_cpu1 - t_cpu0)
+                             if cpu0 and cpu1 else None),
         "node": proc,
     }
 
@@ -326,7 +330,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['interval_ms']['p50']:.3f}/{r['interval_ms']['p99']:.3f}/"
                   f"{r['interval_ms']['max']:.3f} ms, repeated stamps {r['repeated_stamps']}, "
                   f"repeated values {r['repeated_values']}, {r['outputs_after_last_input']} "
-                  f"after the last input", flush=True)
+                  f"after the last input; node CPU {r['node_cpu_percent'] or float('nan'):.0f} % of a core",
+                  flush=True)
         if "switch" in parts:
             new["live_switch"] = s = measure_switch(args.domain, work, args.switch_seconds)
             lat = s["latency_ms"]
