@@ -1,6 +1,6 @@
 """torque_node's fixed-rate output and its live model changes, measured on real processes.
 
-    python benchmarks/torque_node_rate.py [--seconds 20] [--switch-seconds 12]
+    python benchmarks/torque_node_rate.py [--seconds 20] [--switch-seconds 20]
         [--parts rate,switch] [--domain 79] [--out benchmarks/results.json]
 
 Run from the repository root with the venv's python (`make bench-rate`). torque_node runs
@@ -317,7 +317,7 @@ def measure_switch(domain: int, work: Path, seconds: float) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="fixed-rate run (s)")
-    ap.add_argument("--switch-seconds", type=float, default=12.0, help="1 kHz replay with switches (s)")
+    ap.add_argument("--switch-seconds", type=float, default=20.0, help="1 kHz replay with switches (s)")
     ap.add_argument("--parts", default="rate,switch")
     env_domain = int(os.environ.get("ROS_DOMAIN_ID") or 0)
     ap.add_argument("--domain", type=int, default=env_domain or 79)

@@ -7,7 +7,10 @@ Output sensor_msgs/JointState on `joint_torques`: the model's 20 joints in joint
        none); effort = RNEA torques (N·m). With output_rate_hz 0 (default): one output per
        input, header (stamp, frame_id) copied from it. With output_rate_hz > 0: a timer
        publishes at that rate, each output stamped with its publication time (system
-       clock) and computed from the estimator's prediction to that time; when no input came
+       clock) and computed from the estimator's prediction to that time. Deadlines are
+       absolute (k periods from the first); an rcl timer at twice the rate publishes when
+       one is due, so an output delayed by load is caught up (at most one per tick: never
+       a burst, never a stale value) unless more than 50 ms behind. When no input came
        for input_timeout s, or the input's stamps are that far behind this node's clock,
        nothing is published (said in /diagnostics): never a stale repeat, never an
        extrapolation beyond input_timeout.
@@ -64,8 +67,9 @@ from .torque_config import (
 
 _time_ns = time.time_ns
 _monotonic_ns = time.monotonic_ns
-#: output_rate_hz: how many periods late the output may be and still catch up (beyond: dropped)
-_MAX_BACKLOG = 20
+#: output_rate_hz: how late (s) the output may fall behind its deadlines and still catch
+#: up, at most one output per tick (twice the rate); a longer stall drops the periods
+_MAX_BACKLOG_S = 0.05
 _PENDING = "__applies_from_stamp_ns__"  # placeholder in a prepared config text
 
 
@@ -92,6 +96,7 @@ class TorqueNode(JointStreamNode):
             # deadline is due, so a late output is caught up one per tick (never a burst).
             self._period_ns = round(1e9 / self.output_rate_hz)
             self._due_ns = 0
+            self._max_backlog_ns = max(round(_MAX_BACKLOG_S * 1e9), 2 * self._period_ns)
             self.create_timer(0.5 / self.output_rate_hz, self._on_tick)
         b = self._bundle
         self.get_logger().info(
@@ -180,7 +185,7 @@ class TorqueNode(JointStreamNode):
         if now < due:
             return
         late = now - due
-        if late > _MAX_BACKLOG * self._period_ns:  # too far behind: drop, start again from now
+        if late > self._max_backlog_ns:  # too far behind: drop, start again from now
             if due:
                 self.timer_skipped["late"] += late // self._period_ns
             due = now
