@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup test demo lint bench bench-estimation soak reference reproduce clean
+.PHONY: setup test demo lint bench bench-estimation bench-rate soak reference reproduce clean
 
 setup: $(VENV)/.installed
 
@@ -31,6 +31,12 @@ lint: setup
 # benchmarks/ is not part of the installed package: run from the repository root
 bench: setup
 	ROS_DOMAIN_ID=75 $(PY) -m benchmarks --out benchmarks/results.json
+	ROS_DOMAIN_ID=75 $(PY) benchmarks/torque_node_rate.py --out benchmarks/results.json
+	$(PY) benchmarks/estimation.py
+
+# torque_node output_rate_hz 1000 from 100 Hz, and live model changes at 1 kHz (~1 min)
+bench-rate: setup
+	ROS_DOMAIN_ID=79 $(PY) benchmarks/torque_node_rate.py --out benchmarks/results.json
 
 # 10 min of looping replay at 1 kHz (make soak SOAK_MINUTES=2 for a shorter run)
 SOAK_MINUTES ?= 10

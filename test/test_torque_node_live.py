@@ -14,6 +14,7 @@ not pass/fail.
 from __future__ import annotations
 
 import json
+import re
 import signal
 import sys
 import threading
@@ -151,6 +152,7 @@ def _live_changes_during_a_1khz_replay() -> None:
 
         worst = 0.0
         in_force = []
+        warm: set[int] = set()  # outputs of a warm-up sample: computed with q̈ = 0
         for k, (_, m) in enumerate(outputs):
             t = out_stamps[k]
             cfg = config_in_force(configs, t)
@@ -158,17 +160,20 @@ def _live_changes_during_a_1khz_replay() -> None:
             in_force.append(cid)
             q, qd = state((t - t0) * 1e-9)
             assert np.array_equal(np.asarray(m.position), q)
-            warmup = k == 0 or t == first.get(5)  # start, and the new estimator's first sample
-            expected = models[cid].inverse_dynamics(q, qd, np.zeros(20) if warmup else ACC)
-            err = float(np.abs(np.asarray(m.effort) - expected).max())
+            err = float(np.abs(np.asarray(m.effort) - models[cid].inverse_dynamics(q, qd, ACC)).max())
+            if err > 1e-9:  # the start, the new estimator's first sample, or after a stamp gap
+                err = float(np.abs(np.asarray(m.effort) - models[cid].inverse_dynamics(
+                    q, qd, np.zeros(20))).max())
+                warm.add(t)
             worst = max(worst, err)
             assert err <= 1e-9, (k, cid, err)
+        assert {out_stamps[0], first[5]} <= warm, sorted(warm)
         assert in_force == sorted(in_force)  # each config applies from its stamp on
         # the switch is visible: the old model does not fit the first sample of the new
         for cid in (2, 3, 4, 5):
             k = out_stamps.index(first[cid])
             q, qd = state((first[cid] - t0) * 1e-9)
-            old = models[cid - 1].inverse_dynamics(q, qd, ACC)
+            old = models[cid - 1].inverse_dynamics(q, qd, np.zeros(20) if first[cid] in warm else ACC)
             assert np.abs(np.asarray(outputs[k][1].effort) - old).max() > 1e-6
 
         # -- numbers (reported, not judged) -------------------------------------------
@@ -204,4 +209,11 @@ def _live_changes_during_a_1khz_replay() -> None:
         code = proc.stop(signal.SIGINT)
         out = proc.output()
     assert code == 0 and "Traceback" not in out, out[-3000:]
-    assert f"summary: received {N}, processed {N} (warm-up 2), rejected 0" in out, out[-2000:]
+    # warm-up: the start and the new estimator; beyond those, only the samples after a
+    # stamp gap (this process's feeder stalled > 0.1 s on a loaded machine), as many as
+    # the node counted, each one seen above as an output with q̈ = 0
+    summary = re.search(r"summary: received (\d+), processed (\d+) \(warm-up (\d+)\), rejected 0"
+                        r"(?:; estimator resets: stamp_gap (\d+))?$", out, re.MULTILINE)
+    assert summary, out[-2000:]
+    received, processed, warmup, gaps = (int(x or 0) for x in summary.groups())
+    assert received == processed == N and warmup == 2 + gaps == len(warm), (summary[0], sorted(warm))

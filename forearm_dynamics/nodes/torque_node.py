@@ -7,7 +7,10 @@ Output sensor_msgs/JointState on `joint_torques`: the model's 20 joints in joint
        none); effort = RNEA torques (N·m). With output_rate_hz 0 (default): one output per
        input, header (stamp, frame_id) copied from it. With output_rate_hz > 0: a timer
        publishes at that rate, each output stamped with its publication time (system
-       clock) and computed from the estimator's prediction to that time; when no input came
+       clock) and computed from the estimator's prediction to that time. Deadlines are
+       absolute (k periods from the first); an rcl timer at twice the rate publishes when
+       one is due, so an output delayed by load is caught up (at most one per tick: never
+       a burst, never a stale value) unless more than 50 ms behind. When no input came
        for input_timeout s, or the input's stamps are that far behind this node's clock,
        nothing is published (said in /diagnostics): never a stale repeat, never an
        extrapolation beyond input_timeout.
@@ -37,7 +40,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import threading
 import time
 
@@ -64,6 +66,10 @@ from .torque_config import (
 )
 
 _time_ns = time.time_ns
+_monotonic_ns = time.monotonic_ns
+#: output_rate_hz: how late (s) the output may fall behind its deadlines and still catch
+#: up, at most one output per tick (twice the rate); a longer stall drops the periods
+_MAX_BACKLOG_S = 0.05
 _PENDING = "__applies_from_stamp_ns__"  # placeholder in a prepared config text
 
 
@@ -85,7 +91,13 @@ class TorqueNode(JointStreamNode):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         if self.output_rate_hz > 0:
-            self.create_timer(1.0 / self.output_rate_hz, self._on_timer)
+            # An rcl timer skips the periods it was late for (under load: ~5 % of them at
+            # 1 kHz). It ticks at twice the rate; _on_tick publishes when the next absolute
+            # deadline is due, so a late output is caught up one per tick (never a burst).
+            self._period_ns = round(1e9 / self.output_rate_hz)
+            self._due_ns = 0
+            self._max_backlog_ns = max(round(_MAX_BACKLOG_S * 1e9), 2 * self._period_ns)
+            self.create_timer(0.5 / self.output_rate_hz, self._on_tick)
         b = self._bundle
         self.get_logger().info(
             f"model {b.arm.kind}, body size {b.arm.body_size.label}, estimator "
@@ -116,7 +128,7 @@ class TorqueNode(JointStreamNode):
         self._state_t_ns = 0
         self._silent: str | None = None  # why the timer is not publishing
         self._velocity_given = True
-        self.timer_skipped = {"no_input": 0, "input_timeout": 0, "stamps_behind": 0}
+        self.timer_skipped = {"no_input": 0, "input_timeout": 0, "stamps_behind": 0, "late": 0}
         return bundle.arm.joint_names
 
     # -- the hot path --------------------------------------------------------------------
@@ -171,19 +183,35 @@ class TorqueNode(JointStreamNode):
         return fresh
 
     # -- fixed-rate output ---------------------------------------------------------------
-    def _on_timer(self) -> None:
+    def _on_tick(self) -> None:
+        """Publish if the deadline is due: deadlines are k periods apart, whatever the ticks."""
+        now = _monotonic_ns()
+        due = self._due_ns
+        if now < due:
+            return
+        late = now - due
+        if late > self._max_backlog_ns:  # too far behind: drop, start again from now
+            if due:
+                self.timer_skipped["late"] += late // self._period_ns
+            due = now
+        self._due_ns = due + self._period_ns
+        if not self._on_timer():
+            self._due_ns = now + self._period_ns  # silent: resume on time, no catching up
+
+    def _on_timer(self) -> bool:
+        """One output stamped now (system clock), from the estimate predicted to now."""
         now = _time_ns()
         if not self._have_state:
             self._skip("no_input", "no input yet")
-            return
+            return False
         if now - self._last_in_ns > self.input_timeout_ns:
             self._skip("input_timeout", f"no input for {(now - self._last_in_ns) / 1e9:.3f} s "
                        f"(> input_timeout): not publishing")
-            return
+            return False
         if now - self._state_t_ns > self.input_timeout_ns:
             self._skip("stamps_behind", f"input stamps {(now - self._state_t_ns) / 1e9:.3f} s behind "
                        "this node's clock (> input_timeout): not publishing")
-            return
+            return False
         t_start = time.perf_counter_ns()
         stamp = max(now, self._last_out_ns + 1)
         b = self._bundle
@@ -198,7 +226,7 @@ class TorqueNode(JointStreamNode):
         tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             self.stats.rejected[v.NON_FINITE_TORQUE] += 1
-            return
+            return False
         np.copyto(self.effort, tau)
         sec, nsec = divmod(stamp, 1_000_000_000)
         self.out.pack_stamp(sec, nsec)
@@ -212,6 +240,7 @@ class TorqueNode(JointStreamNode):
             self.after_publish(sec, nsec)
         t_end = time.perf_counter_ns()
         self.stats.record(t_end - t_start, now - self._state_t_ns, 0)
+        return True
 
     def _skip(self, key: str, why: str) -> None:
         self.timer_skipped[key] += 1
@@ -370,14 +399,12 @@ class _Builder:
                 self._node._publish_config(bundle, stamp_ns)
             if request is None:
                 continue
-            # While this thread holds the GIL the executor thread waits: hand it back often
-            # (CPython's default switch interval is 5 ms, longer than a 1 kHz period).
-            interval = sys.getswitchinterval()
-            sys.setswitchinterval(1e-5)
-            try:
-                self._node.build(request)
-            finally:
-                sys.setswitchinterval(interval)
+            # Measured (benchmarks/torque_node_rate.py, 2 loaded cores): a build (~2-5 ms)
+            # delays the samples that arrive meanwhile by ~2 ms (p50) whatever is tried:
+            # sys.setswitchinterval(1e-5 or 1e-3) during the build only made it slower
+            # (request -> first new sample ~8 ms instead of ~4 ms), and this thread at nice
+            # 19 was worse still (it holds the GIL while descheduled). So: plain.
+            self._node.build(request)
 
 
 def main() -> None:
