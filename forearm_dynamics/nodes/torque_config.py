@@ -53,7 +53,7 @@ def _model_specs() -> tuple[Spec, ...]:
     return (
         Spec("model", "segmented", "model kind", choices=MODEL_KINDS, live=True),
         Spec("body_size", 50, "body size: an ANSUR II percentile given as an integer (5, 50, 95: men) "
-             "or a string ('50', 'male_95', 'female_5' where the model knows women's sizes); "
+             "or a string ('50', 'male_95', 'female_5': ANSUR II men's and women's sizes); "
              "ignored when custom anthropometry is set. The one parameter that takes two types",
              live=True, dynamic=True),
         Spec("side", "right", "which arm (the left is the mirror image; same joint names and signs)",
@@ -193,8 +193,8 @@ def _body_size_error(msg: str, custom: bool, value: Any) -> ParameterError:
         culprit = next((d for d in DIMENSIONS if msg.startswith(d)), "body_mass")
         return ParameterError(culprit, msg)
     return ParameterError("body_size", f"{value!r} is not a body size: give 5, 50 or 95 (ANSUR II "
-                          "men's percentiles) or a string such as 'male_50' / 'female_50' where "
-                          "the model knows it, or set custom anthropometry (body_mass, stature)")
+                          "men's percentiles), a string 'male_5' ... 'female_95', or set custom "
+                          "anthropometry (body_mass, stature)")
 
 
 @dataclass(frozen=True)
