@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import os
-import subprocess
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -83,8 +81,4 @@ def start_player(bag, *ros_args: str) -> NodeProcess:
     """`bag_player BAG --ros-args ...` (the bag path comes before --ros-args), as rosproc.start,
     on the replay tests' DOMAIN."""
     args = [str(BIN / "bag_player"), str(bag), "--ros-args", *ros_args]
-    out = Path(tempfile.mkstemp(prefix="bag_player_", suffix=".out", dir=_LOG_DIR)[1])
-    err = out.with_suffix(".err")
-    with out.open("wb") as fo, err.open("wb") as fe:
-        proc = subprocess.Popen(args, env=ros_env(DOMAIN), stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
-    return NodeProcess("bag_player", args, proc, out, err)
+    return NodeProcess("bag_player", args, ros_env(DOMAIN), Path(_LOG_DIR), split_stderr=True)

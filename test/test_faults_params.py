@@ -58,6 +58,13 @@ INVALID = [
     ("torque_node", ["estimator.accel_cutoff_hz:=.nan"], "estimator.accel_cutoff_hz"),
     ("torque_node", ["estimator.velocity_cutoff_hz:=-1.0"], "estimator.velocity_cutoff_hz"),
     ("torque_node", ["estimator.velocity_cutoff_hz:=abc"], "estimator.velocity_cutoff_hz"),
+    ("torque_node", ["estimator.kalman_jerk_psd:=0.0"], "estimator.kalman_jerk_psd"),
+    ("torque_node", ["estimator.kalman_noise_deg:=.nan"], "estimator.kalman_noise_deg"),
+    ("torque_node", ["estimator.kalman_velocity_noise_dps:=-1.0"], "estimator.kalman_velocity_noise_dps"),
+    ("torque_node", ["estimator.kalman_noise_floor_deg:=0.0"], "estimator.kalman_noise_floor_deg"),
+    ("torque_node", ["estimator.butterworth_cutoff_hz:=0.0"], "estimator.butterworth_cutoff_hz"),
+    ("torque_node", ["estimator.savgol_window_s:=60.0"], "estimator.savgol_window_s"),
+    ("torque_node", ["estimator.savgol_order:=5.0"], "estimator.savgol_order"),
     ("torque_node", ["side:=up"], "side"),
     ("torque_node", ["payload_mass:=-1.0"], "payload_mass"),
     ("torque_node", ["payload_com:=[0.0,0.1]"], "payload_com"),
@@ -196,13 +203,21 @@ def test_bad_params_file_and_typos(tmp_path) -> None:
 
 
 # -- runtime changes -----------------------------------------------------------------------------
-def _call(peer: rosproc.Peer, srv_type, name: str, request, timeout: float = 15.0):
+def _call(peer: rosproc.Peer, srv_type, name: str, request, timeout: float = 15.0,
+          attempts: int = 3):
+    """One service call. wait_for_service matches the request topic only: a request sent
+    before the server's reply writer has matched this client's reader is answered into the
+    void (seen on this loaded machine), so an unanswered request is sent again (these
+    requests are idempotent: reads, and changes the node refuses)."""
     client = peer.node.create_client(srv_type, name)
     try:
         assert client.wait_for_service(timeout_sec=timeout), f"no service {name}"
-        future = client.call_async(request)
-        assert peer.spin_until(future.done, timeout), f"{name}: no answer"
-        return future.result()
+        for _ in range(attempts):
+            future = client.call_async(request)
+            if peer.spin_until(future.done, timeout):
+                return future.result()
+            client.remove_pending_request(future)
+        raise AssertionError(f"{name}: no answer to {attempts} requests of {timeout:g} s each")
     finally:
         peer.node.destroy_client(client)
 

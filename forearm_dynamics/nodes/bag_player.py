@@ -51,7 +51,7 @@ from ..bag.playback import TIMINGS, Playlist, bag_file, load_playlist, write_sta
 from ..bag.schemas import message_class
 from ..exit_codes import USAGE
 from .common import run
-from .params import ParameterError, Params, Spec
+from .params import ParameterError, Params, Spec, init_node
 
 NAME = "bag_player"
 PROGRESS_PERIOD_NS = 500_000_000
@@ -60,17 +60,20 @@ _CLOCK = struct.Struct("<4siI")  # CDR encapsulation + builtin_interfaces/Time
 
 SPECS = (
     Spec("topics", ["joint_states"], "topics to play (recorded names, namespace optional)"),
-    Spec("rate", 1.0, "time scale: 2.0 plays twice as fast"),
+    Spec("rate", 1.0, "time scale: 2.0 plays twice as fast", "", 1e-3, 1e3),
     Spec("loop", False, "play again from the start until stopped"),
-    Spec("start_offset", 0.0, "s into the bag to start from"),
-    Spec("timing", "log", "'log' (recorder receive times) or 'stamp' (header stamps)"),
+    Spec("start_offset", 0.0, "time into the bag to start from", "s", 0.0, 1e9),
+    Spec("timing", "log", "'log' (recorder receive times) or 'stamp' (header stamps)",
+         choices=TIMINGS),
     Spec("restamp", False, "shift header stamps so the first is now (spacing kept)"),
     Spec("clock", False, "publish /clock with the bag time of each message"),
-    Spec("min_subscribers", 1, "subscribers on the first topic to wait for"),
-    Spec("subscriber_timeout", 10.0, "s to wait for them; then play anyway"),
-    Spec("start_delay", 0.5, "s to wait after the subscribers are there (discovery settles)"),
-    Spec("drain", 2.0, "s to wait at the end for reliable subscribers to acknowledge"),
-    Spec("busy_wait_us", 0, "us before each due time spent busy-waiting instead of sleeping"),
+    Spec("min_subscribers", 1, "subscribers on the first topic to wait for", "", 0, 1000),
+    Spec("subscriber_timeout", 10.0, "wait this long for them; then play anyway", "s", 0.0, 3600.0),
+    Spec("start_delay", 0.5, "wait after the subscribers are there (discovery settles)", "s",
+         0.0, 3600.0),
+    Spec("drain", 2.0, "wait at the end for reliable subscribers to acknowledge", "s", 0.0, 600.0),
+    Spec("busy_wait_us", 0, "time before each due time spent busy-waiting instead of sleeping",
+         "us", 0, 100_000),
 )
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT,
@@ -100,7 +103,7 @@ def clock_bytes(t_ns: int) -> bytes:
 
 
 def _strings(p: Params, name: str) -> list[str]:
-    v = p.raw(name)
+    v = p.value(name)
     if not isinstance(v, (list, tuple)) or not v or not all(isinstance(x, str) and x for x in v):
         raise ParameterError(name, f"must be a non-empty list of topic names, got {v!r}")
     return list(v)
@@ -123,23 +126,21 @@ class BagPlayer(Node):
     """Publishers per topic; a playback thread; `done` when played (and drained)."""
 
     def __init__(self, bag_path: str, node_name: str = NAME):
-        super().__init__(node_name)
-        p = Params(self, SPECS)
-        p.refuse_changes()
+        init_node(self, node_name)
+        p = Params(self, SPECS, NAME)  # every parameter read-only: read once at start-up
         topics = _strings(p, "topics")
-        self.rate = p.number("rate", 1e-3, 1e3)
-        self.loop = p.boolean("loop")
-        start_offset = p.number("start_offset", 0.0)
-        timing = p.string("timing", TIMINGS)
-        self.restamp = p.boolean("restamp")
-        self.clock = p.boolean("clock")
-        self.min_subscribers = p.integer("min_subscribers", 0, 1000)
-        self.subscriber_timeout = p.number("subscriber_timeout", 0.0, 3600.0)
-        self.start_delay = p.number("start_delay", 0.0, 3600.0)
-        self.drain = p.number("drain", 0.0, 600.0)
-        self.busy_wait_ns = 1000 * p.integer("busy_wait_us", 0, 100_000)
-        for name in p.unknown_overrides():
-            self.get_logger().warning(f"ignoring unknown parameter '{name}'")
+        self.rate = p.value("rate")
+        self.loop = p.value("loop")
+        start_offset = p.value("start_offset")
+        timing = p.value("timing")
+        self.restamp = p.value("restamp")
+        self.clock = p.value("clock")
+        self.min_subscribers = p.value("min_subscribers")
+        self.subscriber_timeout = p.value("subscriber_timeout")
+        self.start_delay = p.value("start_delay")
+        self.drain = p.value("drain")
+        self.busy_wait_ns = 1000 * p.value("busy_wait_us")
+        p.warn_unknown()
         try:
             self.playlist: Playlist = load_playlist(open_bag(bag_path), topics, timing, start_offset)
             classes = [message_class(t.channel.schema_name) for t in self.playlist.topics]
