@@ -29,7 +29,8 @@ class RecoverResult:
     problem: str | None  # the damage found in the source, if any
 
 
-def _custom_data(metadata: list[tuple[str, dict[str, str]]]) -> dict[str, str]:
+def custom_data(metadata: list[tuple[str, dict[str, str]]]) -> dict[str, str]:
+    """The rosbag2 metadata's custom_data of a bag (kept by a copy)."""
     for name, data in metadata:
         if name == ROSBAG2_METADATA and SERIALIZED_METADATA_KEY in data:
             try:
@@ -39,6 +40,22 @@ def _custom_data(metadata: list[tuple[str, dict[str, str]]]) -> dict[str, str]:
             custom = info.get("custom_data") if isinstance(info, dict) else None
             return {str(k): str(v) for k, v in (custom or {}).items()}
     return {}
+
+
+def copy_layout(info, writer: BagWriter) -> dict[int, int]:
+    """Copy a bag's metadata records (but its rosbag2 one: the writer writes its own) and its
+    schemas and channels into `writer`; returns source channel id -> new channel id, so
+    messages can then be copied as they are (recover, bag_torques)."""
+    for name, data in info.metadata:
+        if name != ROSBAG2_METADATA:
+            writer.add_metadata(name, data)
+    ids: dict[int, int] = {}
+    for ch in sorted(info.channels.values(), key=lambda c: c.id):
+        sid = writer.add_schema(ch.schema_name, ch.schema_encoding, ch.schema_data) \
+            if ch.schema_name else 0
+        ids[ch.id] = writer.add_channel(ch.topic, sid, ch.schema_name, ch.metadata,
+                                        ch.message_encoding)
+    return ids
 
 
 def recover(src: str | os.PathLike, dst: str | os.PathLike, *, overwrite: bool = False) -> RecoverResult:
@@ -52,17 +69,9 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *, overwrite: bool =
         raise BagError("no_data", f"{src}: nothing to recover (no complete chunk with messages; "
                        f"{info.problem or 'no messages'})")
     writer = BagWriter(dst, overwrite=overwrite, library=info.library or None,
-                       custom_data=_custom_data(info.metadata))
+                       custom_data=custom_data(info.metadata))
     try:
-        for name, data in info.metadata:
-            if name != ROSBAG2_METADATA:
-                writer.add_metadata(name, data)
-        ids: dict[int, int] = {}
-        for ch in sorted(info.channels.values(), key=lambda c: c.id):
-            sid = writer.add_schema(ch.schema_name, ch.schema_encoding, ch.schema_data) \
-                if ch.schema_name else 0
-            ids[ch.id] = writer.add_channel(ch.topic, sid, ch.schema_name, ch.metadata,
-                                            ch.message_encoding)
+        ids = copy_layout(info, writer)
         for ch, msg in bag.messages():
             writer.write(ids[ch.id], msg.data, msg.log_time, msg.publish_time, msg.sequence)
         writer.close()

@@ -35,8 +35,8 @@ from ..nodes.jointstate_cdr import OutputTemplate
 from .errors import BagError
 from .jointstream import JointStream, read_joint_stream
 from .reader import open_bag
-from .recover import _custom_data
-from .rosbag2_meta import ROSBAG2_METADATA, TopicQos
+from .recover import copy_layout, custom_data
+from .rosbag2_meta import TopicQos
 from .writer import BagWriter
 
 #: The node's estimators, then the offline zero-phase one.
@@ -150,17 +150,9 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
         if (ch := info.find_topic(topic)) is not None:
             raise BagError("exists", f"{src} already has {ch.topic}; choose another with --topic "
                            f"(e.g. {output_topic}_offline)")
-    writer = BagWriter(dst, overwrite=overwrite, custom_data=_custom_data(info.metadata))
+    writer = BagWriter(dst, overwrite=overwrite, custom_data=custom_data(info.metadata))
     try:
-        for name, data in info.metadata:
-            if name != ROSBAG2_METADATA:
-                writer.add_metadata(name, data)
-        ids: dict[int, int] = {}
-        for ch in sorted(info.channels.values(), key=lambda c: c.id):
-            sid = writer.add_schema(ch.schema_name, ch.schema_encoding, ch.schema_data) \
-                if ch.schema_name else 0
-            ids[ch.id] = writer.add_channel(ch.topic, sid, ch.schema_name, ch.metadata,
-                                            ch.message_encoding)
+        ids = copy_layout(info, writer)
         out = writer.add_topic("/" + output_topic.strip("/"), "sensor_msgs/msg/JointState",
                                TopicQos(depth=1000))
         cfg = writer.add_topic("/" + config_topic.strip("/"), "std_msgs/msg/String",
