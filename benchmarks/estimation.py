@@ -68,29 +68,38 @@ def candidates() -> list[tuple[str, str, dict]]:
 class Truth:
     """Sample times, exact states and torques of every movement at one rate."""
 
-    def __init__(self, arm, rate: float, jitter: float = 0.0, drop: float = 0.0, seed: int = 0):
+    def __init__(self, arm, rate: float, jitter: float = 0.0, drop: float = 0.0, seed: int = 0,
+                 back_to_back: bool = False):
+        """back_to_back: as trajectory_publisher streams (gap 0): no lead, each movement's
+        first sample one period after the previous movement's last, the posture jumping
+        there in one sample; the estimator is then never reset (run_estimator(reset=False))."""
         rng = np.random.default_rng(seed)
         self.rate = rate
+        self.back_to_back = back_to_back
+        lead_s = 0.0 if back_to_back else LEAD_S
         self.items = []
         self.tau = []  # true torques of the scored samples
         t_start = 0
         for mv in movement_library():
             t = mv.sample_times(rate)
-            lead = np.arange(-round(LEAD_S * rate), 0) / rate
+            lead = np.arange(-round(lead_s * rate), 0) / rate
             t = np.concatenate([lead, t])
             if jitter:
                 t = t + rng.uniform(-jitter, jitter, len(t)) / rate
             if drop:
                 keep = rng.random(len(t)) >= drop
                 t = t[keep]
-            origin = t_start + round(LEAD_S * 1e9)  # the movement's t = 0
+            origin = t_start + round(lead_s * 1e9)  # the movement's t = 0
             stamps = origin + np.round(t * 1e9).astype(np.int64)
             t = (stamps - origin) / 1e9
             q, qd, qdd = mv.evaluate(t)
             i0 = int(np.searchsorted(t, 0.0))  # scored from the movement's start
             self.items.append((mv, stamps, t, q, qd, qdd, i0))
             self.tau.append(arm.inverse_dynamics_batch(q[i0:], qd[i0:], qdd[i0:]))
-            t_start = int(stamps[-1]) + round(GAP_S * 1e9)
+            if back_to_back:  # the next movement's t0: trajectory_publisher's nominal grid
+                t_start = origin + round(len(mv.sample_times(rate)) * 1e9 / rate)
+            else:
+                t_start = int(stamps[-1]) + round(GAP_S * 1e9)
 
 
 def _scale(arm) -> tuple[list[np.ndarray], np.ndarray]:
@@ -113,7 +122,8 @@ def run_estimator(truth: Truth, name: str, settings: dict, noise_rad: float, rng
         zv = None
         if velocity_noise is not None:
             zv = qd if exact else qd + rng.normal(0.0, velocity_noise, qd.shape)
-        est.reset()
+        if not truth.back_to_back:
+            est.reset()
         n = len(stamps)
         res = np.empty((3, n, q.shape[1]))
         ns = np.empty(n, np.int64)
