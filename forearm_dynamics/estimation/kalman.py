@@ -84,6 +84,7 @@ _NOISE_EVERY_S = 0.25
 _NOISE_MIN_DT_S = 2.5e-3
 GATE_SIGMAS = 12.0  # discontinuity: innovation > GATE_SIGMAS sigma + GATE_FLOOR_RAD (any joint)
 GATE_FLOOR_RAD = 0.15
+_FLOOR2 = GATE_FLOOR_RAD**2
 GATE_MAX_PER_WINDOW = 3  # per _NOISE_EVERY_S; beyond, crossings are noise (see the docstring)
 
 
@@ -221,7 +222,8 @@ class KalmanCA(StateEstimator):
             f[0, 2] = 0.5 * dt * dt
             np.dot(f, x, out=t3)  # predict
             np.subtract(q, t3[0], out=e[0])
-            if self._armed and self._gate_left:
+            # the gate; the sum of squares (one call) rules most samples out: threshold > floor
+            if self._armed and self._gate_left and float(np.dot(e[0], e[0])) > _FLOOR2:
                 self._gain(dt, vel)  # the gate threshold of this dt and noise
                 np.abs(e[0], out=self._tmp)
                 if self._tmp.max() > self._gate:  # a discontinuity: start again from here
