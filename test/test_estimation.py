@@ -301,3 +301,134 @@ def test_kalman_on_exact_input_believes_its_noise_floor() -> None:
     floor = math.radians(e.values["kalman_noise_floor_deg"])
     assert e.noise() == pytest.approx(floor) and e.velocity_noise() == pytest.approx(floor)
     np.testing.assert_allclose(eqdd[-100:], qdd[-100:], rtol=0, atol=1e-6)
+
+
+# -- discontinuities: a posture that jumps in one sample (back-to-back movements) -------------
+def jump_stream(dt: float, n: int, k_jump: int, jump: float, noise_deg: float = 0.0, seed: int = 8):
+    """20 joints: at rest, then a quadratic motion over the last 0.5 s before k_jump that
+    ends at rest there, where the posture jumps by `jump` (every joint, alternating signs)
+    and stays: what trajectory_publisher does between two movements (both at rest there,
+    velocities continuous)."""
+    t = stamps(n, dt)
+    s = (t - t[0]) / 1e9
+    te = s[k_jump]  # q = a (s - te)^2 in [te - 0.5, te): at rest at te
+    a = np.linspace(-1.0, 1.0, 20)
+    u = np.clip(s - te, -0.5, 0.0)[:, None]
+    before = s[:, None] < te
+    moving = before & (s[:, None] >= te - 0.5)
+    q = np.where(before, 0.3 + a * u**2, 0.3 + jump * np.where(np.arange(20) % 2, 1, -1))
+    qd = np.where(moving, 2 * a * u, 0.0)
+    qdd = np.where(moving, 2 * a + 0 * u, 0.0)
+    noisy = q + np.random.default_rng(seed).normal(0.0, math.radians(noise_deg), q.shape) if noise_deg else q
+    return t, q, qd, qdd, noisy
+
+
+@pytest.mark.parametrize(("dt", "vel"), [(1e-3, True), (1e-3, False), (0.01, False), (0.05, False)])
+def test_kalman_restarts_at_a_jump_and_is_exact_again(dt, vel) -> None:
+    """The jump sample re-initialises the filter (counted once): from it on the estimate is
+    exactly the new resting posture (q, qd = 0, qdd = 0), as a fresh filter started there,
+    where without the gate the innovation would ring through q, qd, qdd for its whole
+    time constant. Online noise (the default) and a fixed noise alike."""
+    kj = max(round(1.0 / dt), 40)  # after the first noise estimate (0.25-0.5 s): armed
+    n = kj + 200
+    # the library's smallest jump between two movements is 0.39 rad; at 20 Hz the threshold
+    # is higher (12 sigma of a 20 Hz filter + 0.15 rad = 0.4 rad, and the motion's lag)
+    t, q, qd, _, _ = jump_stream(dt, n, kj, 0.39 if dt <= 0.01 else 1.0)
+    for settings in ({}, FIXED_NOISE):
+        e = make_estimator("kalman", 20, settings)
+        eq, eqd, eqdd, warm = feed(e, t, q, qd if vel else None)
+        assert e.discontinuities == 1 and e.describe(dt)["discontinuities"] == 1
+        np.testing.assert_array_equal(eq[kj:], q[kj:])
+        np.testing.assert_allclose(eqd[kj:], 0.0, atol=1e-12)
+        np.testing.assert_allclose(eqdd[kj:], 0.0, atol=1e-12)
+        assert not warm[kj] and warm[kj + (2 if vel else 3):].all()  # warm-up again, as at start
+
+
+def test_kalman_jump_does_not_inflate_the_noise_estimate() -> None:
+    """0.5 deg noise at 100 Hz, a 1 rad jump of every joint: the believed noise after it is
+    the one of the same stream without the jump (the jump's 3rd differences are left out),
+    and the estimate after the jump has the noise of the filter, not a ringing transient."""
+    dt, n, kj = 0.01, 1500, 700
+    t, q, _, _, noisy = jump_stream(dt, n, kj, 1.0, noise_deg=0.5)
+    _, q0, _, _, noisy0 = jump_stream(dt, n, kj, 0.0, noise_deg=0.5)
+    a, b = make_estimator("kalman", 20), make_estimator("kalman", 20)
+    ra, rb = [], []
+    for k in range(n):
+        a.update(int(t[k]), noisy[k], None)
+        b.update(int(t[k]), noisy0[k], None)
+        ra.append(a.noise())
+        rb.append(b.noise())
+    assert a.discontinuities == 1 and b.discontinuities == 0
+    np.testing.assert_allclose(ra, rb, rtol=0.1)  # never inflated (without the gate: x4 at once)
+    assert math.degrees(a.noise()) == pytest.approx(0.5, rel=0.15)
+    np.testing.assert_allclose(a.q - q[-1], b.q - q0[-1], atol=1e-12)  # same filter, same noise
+
+
+def fast_movement(rate: float, amplitude: float, transition: float, n_joints: int = 20):
+    """Min-jerk movements of every joint (amplitude rad over `transition` s, 0.3 s rest
+    before and after), sampled at `rate`; q, qd per sample."""
+    from forearm_dynamics.movements import min_jerk
+
+    t = stamps(round((transition + 0.6) * rate), 1.0 / rate)
+    s, ds, _ = min_jerk(((t - t[0]) / 1e9 - 0.3) / transition)
+    signs = np.where(np.arange(n_joints) % 2, 1.0, -1.0) * np.linspace(0.5, 1.0, n_joints)
+    return t, 0.2 + s[:, None] * amplitude * signs, (ds / transition)[:, None] * amplitude * signs
+
+
+@pytest.mark.parametrize("rate", [20.0, 30.0, 100.0, 1000.0])
+@pytest.mark.parametrize("noise_deg", [0.0, 0.5, 2.0, 5.0])
+def test_kalman_gate_never_fires_on_fast_movements_or_noise(rate, noise_deg) -> None:
+    """Genuine motion is no discontinuity: 130 deg in 0.3 s (elbow speed, faster than any
+    library movement), at 20 Hz to 1 kHz, with noise up to 5 deg, 10 repetitions with
+    different noise (a fresh filter each: the start is where the noise belief is least
+    settled), positions only and with exact velocities."""
+    t, q, qd = fast_movement(rate, math.radians(130.0), 0.3)
+    rng = np.random.default_rng(int(rate) + int(10 * noise_deg))
+    for rep in range(10):
+        z = q + rng.normal(0.0, math.radians(noise_deg), q.shape)
+        for v in (None, qd):
+            e = make_estimator("kalman", 20)
+            feed(e, t, z, v)
+            assert e.discontinuities == 0, (rep, v is None)
+
+
+def test_kalman_gate_never_fires_on_the_other_test_streams() -> None:
+    """The noisy and irregular streams above: noise 0.1 / 2 deg online, the 4000-column
+    white-jerk process, quadratics with jitter and drops."""
+    dt = 0.005
+    t = stamps(1000, dt)
+    q, _, _ = poly(t, np.array([[0.1] * 20, [0.5] * 4 + [0.0] * 16, [-1.0] * 4 + [0.0] * 16]))
+    for deg in (0.1, 2.0):
+        e = make_estimator("kalman", 20)
+        feed(e, t, q + np.random.default_rng(4).normal(0.0, math.radians(deg), q.shape))
+        assert e.discontinuities == 0
+    e = make_estimator("kalman", N_COLS, {"kalman_noise_deg": 0.5})
+    t = stamps(300, 0.01)
+    z = np.cumsum(np.cumsum(np.random.default_rng(3).normal(0, 0.02, (300, N_COLS)), 0), 0) * 1e-2
+    feed(e, t, z + np.random.default_rng(5).normal(0, math.radians(0.5), z.shape))
+    assert e.discontinuities == 0
+    t = stamps(3000, 1e-3, 0.3, 0.05)
+    q, qd, _ = poly(t, COEF2)
+    for v in (None, qd):
+        e = make_estimator("kalman", 2)
+        feed(e, t, q, v)
+        assert e.discontinuities == 0
+
+
+def test_kalman_gate_lets_the_noise_estimate_follow_a_noisier_sensor() -> None:
+    """A sensor whose noise rises from 0.1 to 8 deg at once: the first crossings re-start
+    the filter, but at most GATE_MAX_PER_WINDOW per 0.25 s, so the noise statistics see the
+    new noise and the belief follows (no lock-up in endless re-starts)."""
+    from forearm_dynamics.estimation.kalman import GATE_MAX_PER_WINDOW
+
+    dt, n = 0.01, 2000
+    t = stamps(n, dt)
+    rng = np.random.default_rng(9)
+    sd = np.where(np.arange(n) < 500, math.radians(0.1), math.radians(8.0))[:, None]
+    z = 0.3 + rng.normal(0.0, 1.0, (n, 20)) * sd
+    e = make_estimator("kalman", 20)
+    feed(e, t[:500], z[:500])
+    assert e.discontinuities == 0
+    feed(e, t[500:], z[500:])
+    assert 0 < e.discontinuities <= 4 * GATE_MAX_PER_WINDOW
+    assert math.degrees(e.noise()) == pytest.approx(8.0, rel=0.15)
