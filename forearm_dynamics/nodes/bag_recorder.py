@@ -153,22 +153,28 @@ class BagRecorder(Node):
         self.done = Future()
         self.exit_code = OK
         self.executor_kind = "events"
+        # SIGINT reaches Python as KeyboardInterrupt at any bytecode (rclpy passes it on), also
+        # while the file is being made: a writer not yet made leaves no file behind (the
+        # file is ours: created exclusively), a made one is finished as a complete bag.
+        self.writer = None
+        existed = path.exists()
         try:
             self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
                                     compression=compression)
-        except BagWriteError as exc:
-            raise ParameterError("output", str(exc)) from None
-        try:
             for plan, topic in zip(plans, resolved, strict=True):
                 qos = latched_qos() if plan.latched else stream_qos(depth)
                 channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
                 self.create_subscription(plan.msg_class, topic, self._callback(channel), qos, raw=True)
             self.create_timer(flush_period, self._flush_if_due)
         except BagWriteError as exc:
-            self.writer.abort()
+            if self.writer is not None:
+                self.writer.abort()
             raise ParameterError("output", str(exc)) from None
         except BaseException:  # a signal during start-up: leave a complete (empty) bag
-            self.finish()
+            if self.writer is not None:
+                self.finish()
+            elif not existed and path.exists():
+                path.unlink(missing_ok=True)
             raise
         debug = self.get_logger().debug
         self.writer.on_chunk = lambda n: debug(f"chunk closed: {n} messages on disk")
