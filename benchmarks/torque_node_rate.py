@@ -224,7 +224,10 @@ def measure_switch(domain: int, work: Path, seconds: float) -> dict:
     def state(t_s: float):
         return q0 + v0 * t_s + 0.5 * acc * t_s * t_s, v0 + acc * t_s
 
-    child = _start_node("torque_node_switch", ["-p", "diagnostics_period:=0.5"], domain, work)
+    # the backward estimator: exact for this stream, so every output can be checked against
+    # the model in force at its stamp (the switch is what is measured, not the estimator)
+    child = _start_node("torque_node_switch", ["-p", "diagnostics_period:=0.5",
+                                               "-p", "estimator:=backward"], domain, work)
     peer = Peer(domain)
     raw: list[tuple[int, bytes]] = []
     configs: list[tuple[int, dict]] = []
