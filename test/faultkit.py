@@ -265,14 +265,22 @@ def joint_series(bag, topic: str) -> dict[str, np.ndarray]:
 
 
 def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * MS) -> int:
-    """Every recorded torque is exactly what torque_node must compute from the sample it
-    carries and the one before it: qdd = backward difference of velocity over the stamps,
-    0 after a pause > max_gap_ns (warm-up). Returns the number of warm-up samples."""
+    """Every recorded torque is exactly what torque_node (backward estimator) must compute
+    from the sample it carries and the one before it: qdd = backward difference of velocity
+    over the stamps, 0 after a pause (warm-up). A pause is the node's adaptive stamp gap
+    (its default): longer than max_gap_ns AND GAP_PERIODS x the previous interval (a stalled
+    publisher's slow samples are not pauses). Returns the number of warm-up samples."""
+    from forearm_dynamics.nodes.stream_node import GAP_PERIODS
+
     t, pos, vel, eff = series["stamp"], series["position"], series["velocity"], series["effort"]
     assert len(t) and np.all(np.diff(t) > 0), "torques out of order or repeated"
     qdd = np.zeros_like(vel)
     dt = np.diff(t)
-    cont = dt <= max_gap_ns
+    cont = np.empty(len(dt), bool)
+    last_dt = 0
+    for k, d in enumerate(dt.tolist()):
+        cont[k] = d <= max(max_gap_ns, GAP_PERIODS * last_dt)
+        last_dt = d if cont[k] else 0
     step = (vel[1:] - vel[:-1]) * (1.0 / (dt * 1e-9))[:, None]
     qdd[1:][cont] = step[cont]
     expected = MODEL.inverse_dynamics(pos, vel, qdd)

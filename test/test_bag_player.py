@@ -171,7 +171,11 @@ def test_rate_scales_time(bag):
     t = np.array([r for r, _ in lis.got])
     span_bag = (written["logs"][-1] - written["logs"][0]) / 1e9
     span = (t[-1] - t[0]) / 1e9
-    assert span >= span_bag / 4 - 0.1, span
+    # The typical interval (median: a few messages held up in delivery on a loaded machine
+    # and then received together do not move it) is the bag's, divided by 4.
+    period = np.median(np.diff(t)) / 1e9
+    period_bag = np.median(np.diff(written["logs"])) / 1e9
+    assert 0.5 * period_bag / 4 <= period <= 1.5 * period_bag / 4, (period, period_bag)
     assert span < span_bag * 0.9, f"rate 4 took {span:.2f} s for a {span_bag:.2f} s bag"
     assert (t[1000] - t[999]) / 1e9 >= GAP / 4e9 - 0.05
 

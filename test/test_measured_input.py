@@ -43,12 +43,15 @@ def run():
     peer = rosproc.Peer("measured_input_test")
     outputs: list[JointState] = []
     markers: list[dict] = []
-    peer.node.create_subscription(JointState, "joint_torques", outputs.append, stream_qos(1000))
+    torques = peer.node.create_subscription(JointState, "joint_torques", outputs.append,
+                                            stream_qos(1000))
     peer.node.create_subscription(String, "movement", lambda m: markers.append(json.loads(m.data)),
                                   marker_qos())
     pub = None
     try:
         assert node.wait_for_output("config on", 30), node.output()
+        # the node's answers are volatile: listen before the first one is sent
+        assert peer.spin_until(lambda: torques.get_publisher_count() > 0, 30), node.output()
         pub = rosproc.start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}",
                             "-p", f"rate_hz:={RATE_HZ}", "-p", "noise_deg:=0.5",
                             "-p", "publish_velocity:=false", "-p", "seed:=11",

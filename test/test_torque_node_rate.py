@@ -97,8 +97,13 @@ def test_fixed_output_rate_from_a_100hz_input() -> None:
         assert first.sum() > BURSTS[0], first.sum()  # upsampled (1000 Hz nominal from 100 Hz)
         assert second.sum() > 0, "did not publish again when the input came back"
 
-        # each output: the exact state at its stamp, or the prediction from a burst's first
-        # (warm-up) sample: its acceleration is 0
+        # each output: the exact state at its stamp, or the prediction from a warm-up sample
+        # (acceleration 0): a burst's first input, or one after a pause of the feeder longer
+        # than the node's stamp gap (0.1 s and 5 x the previous interval: this test process
+        # can stall that long on a loaded machine; the node then restarts its estimator)
+        inputs = np.array(bursts[0] + bursts[1])
+        gaps = np.diff(inputs, prepend=inputs[0])
+        restarts = {bursts[0][0], bursts[1][0]} | set(inputs[gaps > 100 * MS].tolist())
         exact = 0
         worst = 0.0
         for m, t in zip(outs, stamps, strict=True):
@@ -109,7 +114,9 @@ def test_fixed_output_rate_from_a_100hz_input() -> None:
                 exact += 1
                 worst = max(worst, err)
                 continue
-            t1 = bursts[0][0] if t < bursts[1][0] else bursts[1][0]
+            # predicted from the latest warm-up input before it (the node predicts from the
+            # latest input it has received, which may lag the latest one sent)
+            t1 = max(r for r in restarts if r <= t)
             q1, qd1 = state((t1 - t0) * 1e-9)
             dt = (t - t1) * 1e-9
             np.testing.assert_allclose(m.position, q1 + dt * qd1, rtol=0, atol=1e-9)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gc
+import signal
 import sys
 from collections.abc import Callable
 from importlib import metadata
@@ -133,12 +134,29 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
             spin(node, executor, done=getattr(node, "done", None))
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
-        finish = getattr(node, "finish", None)
-        return finish() if callable(finish) else getattr(node, "exit_code", OK)
+        try:
+            return _finish(node)
+        except KeyboardInterrupt:  # a second SIGINT before the first lines of _finish held it
+            return _finish(node)
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+def _finish(node: Node) -> int:
+    """The node's finish() (e.g. close a file) with SIGINT/SIGTERM ignored meanwhile: a second
+    signal (an impatient Ctrl-C, a supervisor's SIGTERM after SIGINT) must not cut it short;
+    finish() is idempotent, so an interrupted call is simply made again (run())."""
+    finish = getattr(node, "finish", None)
+    if not callable(finish):
+        return getattr(node, "exit_code", OK)
+    held = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return finish()
+    finally:
+        for s, handler in held.items():
+            signal.signal(s, handler)
 
 
 def main_for(make_node: Callable[[], Node], name: str) -> None:
