@@ -46,7 +46,12 @@ import numpy as np
 from forearm_dynamics.analysis.filtering import analysis_config, lowpass
 from forearm_dynamics.description import DOF_GROUPS, JOINT_NAMES
 from forearm_dynamics.dynamics import build_model
-from forearm_dynamics.estimation import DEFAULT_ESTIMATOR, ESTIMATORS, make_estimator
+from forearm_dynamics.estimation import (
+    DEFAULT_ESTIMATOR,
+    ESTIMATORS,
+    RECOMMENDED_FOR_MEASURED_INPUT,
+    make_estimator,
+)
 from forearm_dynamics.movements import movement_library
 
 HERE = Path(__file__).resolve().parent
@@ -310,7 +315,7 @@ def _row(rows, label, rate, noise):
 
 
 def targets(rows, extra) -> dict:
-    d = DEFAULT_ESTIMATOR
+    d = RECOMMENDED_FOR_MEASURED_INPUT
     out = {"default": d, "ratio_to_baseline_100_250hz_0.5deg": {}}
     for rate in (100.0, 250.0):
         for g in ("elbow", "pro_sup"):
@@ -421,7 +426,7 @@ def figure(rows, path: Path) -> None:
             ax = axes[gi, ni]
             for lab in labels:
                 ys = [_row(rows, lab, r, noise)["groups"][g]["global"] for r in RATES]
-                ax.plot(RATES, ys, "o-", label=lab, lw=2.5 if lab == DEFAULT_ESTIMATOR else 1.2)
+                ax.plot(RATES, ys, "o-", label=lab, lw=2.5 if lab == RECOMMENDED_FOR_MEASURED_INPUT else 1.2)
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_title(f"{g}, noise {noise} deg")

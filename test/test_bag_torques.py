@@ -143,18 +143,12 @@ def test_bad_input_one_line_exit_2(src, tmp_path, case):
         assert not out.exists()
 
 
-def test_the_default_is_the_nodes_estimator_sample_by_sample(src, tmp_path):
-    """Without --estimator: the node's default estimator (DEFAULT_ESTIMATOR), its update()
-    sample by sample, q and qd as it estimates them (what the node computes with)."""
-    from forearm_dynamics.estimation import DEFAULT_ESTIMATOR
-
+def test_every_node_estimator_sample_by_sample(src, tmp_path):
+    """--estimator kalman: its update() sample by sample, q and qd as it estimates them (what
+    the node computes with), with a setting passed through --setting."""
     path, written = src
-    out = tmp_path / "default.mcap"
-    r = run(path, out, "--setting", "kalman_jerk_psd=1000" if DEFAULT_ESTIMATOR == "kalman"
-            else "x=1")
-    if DEFAULT_ESTIMATOR != "kalman":
-        assert r.returncode == 2 and "x" in r.stderr
-        return
+    out = tmp_path / "kalman.mcap"
+    r = run(path, out, "--estimator", "kalman", "--setting", "kalman_jerk_psd=1000")
     assert r.returncode == 0, r.stderr
     got = read(out)
     assert got["config"]["estimator"]["method"] == "kalman"

@@ -18,8 +18,15 @@ from .savgol import SavitzkyGolay
 
 #: name -> class. The first entry is the default (chosen by benchmarks/estimation.py).
 ESTIMATORS: dict[str, type[StateEstimator]] = {
-    cls.name: cls for cls in (KalmanCA, BackwardDifference, ButterworthDifference, SavitzkyGolay)
+    cls.name: cls for cls in (BackwardDifference, KalmanCA, ButterworthDifference, SavitzkyGolay)
 }
+
+#: What the estimation benchmark measured best for measured (noisy, positions-only) input at
+#: every rate (benchmarks/estimation.py). Not the node's default yet: on a real jittered
+#: 1 kHz stream its gain lookup solves Riccati equations inside the callback, and under load
+#: the node then falls behind 1 kHz (README, Performance). Set `estimator: kalman` for
+#: motion capture, gloves and cameras.
+RECOMMENDED_FOR_MEASURED_INPUT = "kalman"
 
 DEFAULT_ESTIMATOR = next(iter(ESTIMATORS))
 
@@ -45,6 +52,7 @@ def all_settings() -> dict[str, SettingSpec]:
 __all__ = [
     "DEFAULT_ESTIMATOR",
     "ESTIMATORS",
+    "RECOMMENDED_FOR_MEASURED_INPUT",
     "SettingSpec",
     "StateEstimator",
     "all_settings",
