@@ -209,6 +209,12 @@ for k in range(count):
 elapsed = time.perf_counter() - start
 with open(cfg["out"], "w") as fh:
     fh.write("\n".join(map(str, stamps)))
+if burst:  # every answer this feeder received (it paces by them, so it keeps up)
+    wait_until = time.monotonic() + 30
+    while stamps[-1] not in answered and time.monotonic() < wait_until:
+        rclpy.spin_once(node, timeout_sec=0.01)
+    with open(cfg["out"] + ".answers", "w") as fh:
+        fh.write("\n".join(map(str, sorted(answered))))
 print("published", len(stamps), f"{elapsed:.3f}", flush=True)
 pub.wait_for_all_acked(Duration(seconds=cfg.get("drain", 5.0)))
 node.destroy_node()
