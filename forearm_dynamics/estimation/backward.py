@@ -100,17 +100,8 @@ class BackwardDifference(StateEstimator):
             np.copyto(self.qd, qd)
             if self._vel.has_prev:
                 self._vel.reset()
-        else:
-            self._vel.update(q, dt)
-            np.copyto(self.qd, self._vel.out)
-            if not self._vel.valid:
-                # No velocity yet: keep the acceleration history empty too.
-                self._acc.reset()
-                self.qdd.fill(0.0)
-                return False
-        self._acc.update(self.qd, dt)
-        np.copyto(self.qdd, self._acc.out)
-        return self._acc.valid
+            return differences(None, self._vel, self._acc, self.qd, self.qdd, dt)
+        return differences(q, self._vel, self._acc, self.qd, self.qdd, dt)
 
     def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
         ta = _tau(self.values["accel_cutoff_hz"])
@@ -118,6 +109,23 @@ class BackwardDifference(StateEstimator):
         if velocity_given:
             return {"q": 0.0, "qd": 0.0, "qdd": dt / 2 + ta}
         return {"q": 0.0, "qd": dt / 2 + tv, "qdd": dt + tv + ta}
+
+
+def differences(q: np.ndarray | None, vel: _Differentiator, acc: _Differentiator,
+                qd: np.ndarray, qdd: np.ndarray, dt: float) -> bool:
+    """qd from positions q (None: qd is given and already in `qd`), then qdd from qd, by
+    backward differences over dt (shared by the backward and Butterworth estimators);
+    returns warm. Without a velocity yet, the acceleration history stays empty too."""
+    if q is not None:
+        vel.update(q, dt)
+        np.copyto(qd, vel.out)
+        if not vel.valid:
+            acc.reset()
+            qdd.fill(0.0)
+            return False
+    acc.update(qd, dt)
+    np.copyto(qdd, acc.out)
+    return acc.valid
 
 
 def _tau(cutoff_hz: float) -> float:

@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 
-from .backward import _Differentiator
+from .backward import _Differentiator, differences
 from .base import SettingSpec, StateEstimator
 
 SQRT2 = math.sqrt(2.0)
@@ -138,18 +138,10 @@ class ButterworthDifference(StateEstimator):
             np.copyto(self.qd, self._vel_filter.y)
             if self._vel.has_prev:
                 self._vel.reset()
-        else:
-            if self._vel_filter.started:
-                self._vel_filter.reset()
-            self._vel.update(self.q, dt)
-            np.copyto(self.qd, self._vel.out)
-            if not self._vel.valid:
-                self._acc.reset()
-                self.qdd.fill(0.0)
-                return False
-        self._acc.update(self.qd, dt)
-        np.copyto(self.qdd, self._acc.out)
-        return self._acc.valid
+            return differences(None, self._vel, self._acc, self.qd, self.qdd, dt)
+        if self._vel_filter.started:
+            self._vel_filter.reset()
+        return differences(self.q, self._vel, self._acc, self.qd, self.qdd, dt)
 
     def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
         # DC group delay of the digital filter: dt (sum k b_k / sum b_k - sum k a_k / sum a_k)
