@@ -70,6 +70,19 @@ class Watch:
         assert self.peer.spin_until(lambda: len(self.torques) >= start + n, timeout), \
             f"only {len(self.torques) - start} of {n} torques"
 
+    def wait_recorded(self, path: Path, topic: str, after_ns: int, timeout: float = 30.0) -> bool:
+        """Spin until the recording in progress at path holds a message on topic logged after
+        after_ns (its closed chunks are read as a truncated file is)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.peer.spin_for(0.5)
+            try:
+                if any(m.log_time > after_ns for _ch, m in open_bag(path).messages([topic])):
+                    return True
+            except BagError:  # not yet readable: keep waiting
+                pass
+        return False
+
     def close(self) -> None:
         self.peer.close()
 
@@ -174,6 +187,11 @@ def test_torque_node_killed_and_restarted(procs, tmp_path) -> None:
         node2 = procs.start("torque_node", "-p", "diagnostics_period:=0.5", *EXACT, domain=domain)
         watch.wait_torques(1500)  # it came back and serves
         diag = watch.diag.fresh()
+        # The recorder may discover the new node only at Fast DDS's next participant
+        # announcement (~3 s, later on a loaded machine): stop once the file being written
+        # holds the new node's config, not after a fixed time.
+        assert watch.wait_recorded(tmp_path / "run.mcap", "/torque_node/config", t_kill), \
+            "the recorder never recorded the restarted node's config"
         assert pub.stop(signal.SIGINT) == 0, pub.output()
         watch.peer.spin_for(0.3)
         assert rec.stop(signal.SIGINT) == 0, rec.output()
