@@ -39,6 +39,7 @@ setup(
         "pin>=3.0",
         "pyyaml>=6",
         "scipy>=1.11",
+        "threadpoolctl>=3.1",  # one BLAS thread in the nodes (nodes/common.py run())
         "mcap>=1.5",  # Writer.flush() (public) first in 1.5.0
         "ros-jazzy-rclpy",
         "ros-jazzy-rmw-fastrtps-cpp",

@@ -361,7 +361,10 @@ def test_kalman_jump_does_not_inflate_the_noise_estimate() -> None:
     assert a.discontinuities == 1 and b.discontinuities == 0
     np.testing.assert_allclose(ra, rb, rtol=0.1)  # never inflated (without the gate: x4 at once)
     assert math.degrees(a.noise()) == pytest.approx(0.5, rel=0.15)
-    np.testing.assert_allclose(a.q - q[-1], b.q - q0[-1], atol=1e-12)  # same filter, same noise
+    # same filter: the estimates differ only by the few % the two noise beliefs differ by
+    # (a ringing transient would be of the jump's size, 1 rad)
+    diff, err = (a.q - q[-1]) - (b.q - q0[-1]), b.q - q0[-1]
+    assert np.abs(diff).max() <= 0.05 * np.abs(err).max(), (np.abs(diff).max(), np.abs(err).max())
 
 
 def fast_movement(rate: float, amplitude: float, transition: float, n_joints: int = 20):

@@ -1,4 +1,4 @@
-"""Kalman filter with a white-jerk (constant-acceleration) model per joint, steady-state gains.
+"""Kalman filter with a white-jerk (constant-acceleration) model per joint, one shared covariance.
 
 State per joint x = [q, qd, qdd]; between samples dt apart
     x' = F x + w,  F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]],
@@ -7,27 +7,41 @@ State per joint x = [q, qd, qdd]; between samples dt apart
 Measurement: the position (noise std r), and with velocities given also the velocity
 (noise std r_v), fused as a second measurement row.
 
-Steady-state gains: the gain of the converged filter depends only on (dt, r, r_v, S), the
-same for every joint, so an update is two small matrix products on the stacked state
-X = [q; qd; qdd] (3, n): X = F X (predict), X += K E (correct with the innovations E).
-Gains come from the discrete algebraic Riccati equation (scipy.linalg.solve_discrete_are)
-and are cached by dt bucket (4 % wide, log scale) and noise bucket (12 % wide): a jittered
-stream reuses a handful of gains, a dropped
-sample (one 2 dt step) gets the gain of its own dt, and nothing is solved per sample once
-the buckets are filled. Start (and after a reset): q = the first sample, qd = 0 (or the
-given velocity), qdd = 0, steady-state gains from the first step: a stream that starts at
-rest has no start-up transient (a time-varying warm-up from a wide prior would put the
-noise of raw differences into the first estimates); one that starts in motion converges
-with the filter's own time constant (about the qdd lag). warm after 3 samples (2 with
-velocities), as the backward difference.
+Gains: all joints share dt, the noise levels and the model, hence one 3x3 covariance P
+for all of them; it is propagated per sample (P' = F P F^T + Q, then the measurement
+update) in plain float arithmetic, ~40 multiplications (a few us), and the update is two
+small matrix products on the stacked state X = [q; qd; qdd] (3, n): X = F X (predict),
+X += K E (correct with the innovations E). So every sample gets the exact gain of its own
+dt and the current noise belief: a jittered stream, a dropped sample (one 2 dt step) or a
+new noise estimate costs nothing extra. (Before: steady-state gains from
+scipy.linalg.solve_discrete_are cached by dt and noise bucket. Under a real 1 kHz
+stream's stamp jitter the buckets kept missing: ~10 Riccati solves (1-2 ms each) per
+second inside the callback, each waking OpenBLAS threads that then spun for a core:
+torque_node at 105 % CPU with a 3 ms callback p99.) Start: P is the steady-state
+covariance of the first step's dt (solve_discrete_are, once per estimator; a reset keeps
+P, since the sensor did not change), so a stream that starts at rest has no start-up
+transient (a time-varying warm-up from a wide prior would put the noise of raw
+differences into the first estimates); one that starts in motion converges with the
+filter's own time constant (about the qdd lag). When the online noise belief moves more
+than 12 % from the one P was seated at, P is seated again at the new steady state (one
+solve; a handful per stream: at the start, at the first estimate, when the sensor
+changes): the propagation alone would take the filter's time constant to follow, and
+meanwhile the gate below would judge with the old, too small, uncertainty. State at the
+start and after a reset: q = the first sample, qd = 0 (or the given velocity), qdd = 0;
+warm after 3 samples (2 with velocities), as the backward difference.
 
 Noise: kalman_noise_deg > 0 fixes the position noise std (degrees); 0 estimates it online:
 per joint an exponentially weighted mean (time constant 2 s) of the squared third
 difference of the raw positions (= 20 r^2 for white noise when the signal is smooth;
 taken at every 4th sample above 400 Hz, which is plenty and saves time),
 the median over joints every 0.25 s (most joints are still at any time, so motion hardly
-biases it), floored at kalman_noise_floor_deg. Velocity noise likewise from the second
-difference of the given velocities (= 6 r_v^2), or fixed by kalman_velocity_noise_dps.
+biases it), floored at kalman_noise_floor_deg. Velocity noise likewise from the given
+velocities, or fixed by kalman_velocity_noise_dps: v0 - v1 - rho (v1 - v2), rho = dt0/dt1
+the ratio of the last two steps, which is zero for any constant acceleration at any stamp
+spacing and has variance (1 + (1 + rho)^2 + rho^2) r_v^2 for white noise (6 r_v^2 when
+rho = 1). The plain second difference is not zero under stamp jitter: it takes the
+acceleration times the jitter for noise (100 rad/s^2 x 0.2 ms = 1.1 deg/s on exact
+velocities).
 
 Lag: the model is exact for constant acceleration, so q and qd have no delay at low
 frequency; under a constant jerk j the acceleration estimate settles at qdd - j d, d the
@@ -37,7 +51,7 @@ predict(t) extrapolates the model (constant acceleration) from the last update.
 Discontinuities (a posture that jumps in one sample, as between two movements that
 trajectory_publisher plays back to back, or a tracker that re-acquires a hand): a sample
 whose position innovation on any joint exceeds GATE_SIGMAS x sigma + GATE_FLOOR_RAD (sigma:
-the innovation std of the gain in use, sqrt(P_qq + r^2)) is a discontinuity: the filter is
+the innovation std of this sample, sqrt(P_qq + r^2) of its prior) is a discontinuity: the filter is
 re-initialised from that sample as at the start (q = the sample, qd = 0 or the given
 velocity, qdd = 0; warm again after 3 (2) samples), the sample stays out of the noise
 statistics (their difference rings restart from it), and `discontinuities` counts it.
@@ -76,9 +90,7 @@ from scipy.linalg import solve_discrete_are
 
 from .base import SettingSpec, StateEstimator
 
-_DT_STEP = math.log(1.04)
-_NOISE_STEP = math.log(1.12)
-_CACHE_MAX = 512
+_RESEAT = math.log(1.12)  # a noise belief this much (12 %) off P's seat re-seats P
 _NOISE_TAU_S = 2.0
 _NOISE_EVERY_S = 0.25
 _NOISE_MIN_DT_S = 2.5e-3
@@ -99,12 +111,6 @@ def process_noise(dt: float, psd: float) -> np.ndarray:
                            [d3 / 6, d2 / 2, dt]])
 
 
-def _unbucket(key: tuple) -> tuple[float, float, float | None]:
-    """(dt, r, r_v) at the centre of a gain-cache bucket."""
-    return (math.exp(key[0] * _DT_STEP), math.exp(key[1] * _NOISE_STEP),
-            None if key[2] is None else math.exp(key[2] * _NOISE_STEP))
-
-
 def steady_state(dt: float, r: float, r_v: float | None, psd: float) -> tuple[np.ndarray, np.ndarray]:
     """(gain K (3, m), prior covariance P) of the converged filter; m = 1 or 2 measurements.
 
@@ -117,6 +123,29 @@ def steady_state(dt: float, r: float, r_v: float | None, psd: float) -> tuple[np
     p = solve_discrete_are(f.T, h.T, q, rm)
     k = p @ h.T @ np.linalg.inv(h @ p @ h.T + rm)
     return k, p * (r * r)
+
+
+def measurement_update(m: tuple[float, ...], r2: float, rv2: float | None
+                       ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(gain, posterior) from the prior M (m00 m01 m02 m11 m12 m22), position variance r2
+    and, velocities given, velocity variance rv2. Gain: (k0, k1, k2) for positions only,
+    else row by row (k00, k01, k10, k11, k20, k21); posterior in M's layout."""
+    m00, m01, m02, m11, m12, m22 = m
+    s00 = m00 + r2
+    if rv2 is None:
+        k0, k1, k2 = m00 / s00, m01 / s00, m02 / s00
+        return (k0, k1, k2), (m00 - k0 * m00, m01 - k0 * m01, m02 - k0 * m02,
+                              m11 - k1 * m01, m12 - k1 * m02, m22 - k2 * m02)
+    s11 = m11 + rv2
+    det = s00 * s11 - m01 * m01
+    i00, i01, i11 = s11 / det, -m01 / det, s00 / det  # S^-1
+    # K = M H^T S^-1: row i is (m_i0, m_i1) S^-1
+    k00, k01 = m00 * i00 + m01 * i01, m00 * i01 + m01 * i11
+    k10, k11 = m01 * i00 + m11 * i01, m01 * i01 + m11 * i11
+    k20, k21 = m02 * i00 + m12 * i01, m02 * i01 + m12 * i11
+    return (k00, k01, k10, k11, k20, k21), (
+        m00 - k00 * m00 - k01 * m01, m01 - k00 * m01 - k01 * m11, m02 - k00 * m02 - k01 * m12,
+        m11 - k10 * m01 - k11 * m11, m12 - k10 * m02 - k11 * m12, m22 - k20 * m02 - k21 * m12)
 
 
 class KalmanCA(StateEstimator):
@@ -143,7 +172,6 @@ class KalmanCA(StateEstimator):
         self._floor = math.radians(v["kalman_noise_floor_deg"])
         self._fixed_r = math.radians(v["kalman_noise_deg"]) or None
         self._fixed_rv = math.radians(v["kalman_velocity_noise_dps"]) or None
-        self._cache: dict[tuple, tuple[np.ndarray, float]] = {}  # (gain, gate threshold)
         self._r_v_default = self._fixed_rv or math.radians(1.0)  # before any estimate: 1 deg/s
         self._r_default = self._fixed_r or math.radians(0.5)  # before any estimate: 0.5 deg
         # The filter state X = [q; qd; qdd] (3, n); one sample is X = F X, X += K E with
@@ -152,20 +180,23 @@ class KalmanCA(StateEstimator):
         self._T3 = np.zeros((3, n))
         self._F = np.eye(3)
         self._E = np.zeros((2, n))  # innovations: position, velocity
+        self._K = np.zeros((3, 2))  # the gain of the last sample (one or two columns in use)
+        self._P: tuple[float, ...] | None = None  # posterior covariance p00 p01 p02 p11 p12 p22
+        self._seat = (1.0, 1.0)  # the noise (r, r_v) P was last seated at the steady state for
+        self._K1 = self._K[:, :1]  # positions only: one column (a view, made once)
+        self._E1 = self._E[:1]
         self._out = np.zeros((3, n))  # the outputs q, qd, qdd are its rows
         self.q, self.qd, self.qdd = self._out
         self._tmp = np.zeros(n)
         # online noise: rings of raw samples; a difference is one product with rotated weights
         self._ring = np.zeros((4, n))
         self._vring = np.zeros((3, n))
+        self._tmp2 = np.zeros(n)
         self._d3 = [np.roll([-1.0, 3.0, -3.0, 1.0], h + 1) for h in range(4)]  # newest at h
-        self._d2 = [np.roll([1.0, -2.0, 1.0], h + 1) for h in range(3)]
+        self._vdt = 0.0  # the step before the last: rho of the velocity difference
         self._ms = np.zeros(n)
         self._ms_v = np.zeros(n)
         self._r, self._r_v = self._r_default, self._r_v_default
-        self._noise_key: tuple | None = None
-        self._last_dt, self._last_vel, self._last_gain = -1.0, False, None
-        self._gate = math.inf  # threshold of the gain in use (rad)
         self._armed = self._fixed_r is not None  # online noise: after its first estimate
         self._gate_left = GATE_MAX_PER_WINDOW
         self.discontinuities = 0  # samples that re-initialised the filter (the node may report it)
@@ -190,25 +221,38 @@ class KalmanCA(StateEstimator):
     def velocity_noise(self) -> float | None:
         return self._r_v
 
-    def _gain(self, dt: float, vel: bool) -> np.ndarray:
-        if dt == self._last_dt and vel == self._last_vel and self._last_gain is not None:
-            return self._last_gain
-        nk = self._noise_key
-        if nk is None or nk[0] != self._r or nk[1] != self._r_v:  # the noise changed
-            nk = self._noise_key = (self._r, self._r_v, round(math.log(self._r) / _NOISE_STEP),
-                                    round(math.log(self._r_v) / _NOISE_STEP))
-        key = (round(math.log(dt) / _DT_STEP), nk[2], nk[3] if vel else None)
-        c = self._cache.get(key)
-        if c is None:
-            dtc, rc, rvc = _unbucket(key)
-            g, p = steady_state(dtc, rc, rvc, self.psd)  # K (3, 1 or 2), prior covariance
-            c = (g, GATE_SIGMAS * math.sqrt(p[0, 0] + rc * rc) + GATE_FLOOR_RAD)
-            if len(self._cache) >= _CACHE_MAX:
-                self._cache.clear()
-            self._cache[key] = c
-        g, self._gate = c
-        self._last_dt, self._last_vel, self._last_gain = dt, vel, g
-        return g
+    def _start_covariance(self, dt: float, vel: bool) -> None:
+        """P = the steady-state posterior covariance at dt (see the module docstring)."""
+        k, m = steady_state(dt, self._r, self._r_v if vel else None, self.psd)
+        self._seat = (self._r, self._r_v)
+        h = np.eye(3)[: k.shape[1]]
+        post = m - k @ (h @ m)
+        self._P = tuple(float(post[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+
+    def _prior(self, dt: float) -> tuple[float, ...]:
+        """M = F P F^T + Q at dt (m00 m01 m02 m11 m12 m22), plain floats: ~30 multiplications,
+        cheaper than numpy calls on 3x3 arrays."""
+        p00, p01, p02, p11, p12, p22 = self._P
+        h = 0.5 * dt * dt
+        a0, a1, a2 = p00 + dt * p01 + h * p02, p01 + dt * p11 + h * p12, p02 + dt * p12 + h * p22
+        b1, b2 = p11 + dt * p12, p12 + dt * p22
+        s = self.psd * dt
+        return (a0 + dt * a1 + h * a2 + s * h * h / 5,  # Q: S dt^5/20
+                a1 + dt * a2 + s * h * dt / 4,  # S dt^4/8
+                a2 + s * h / 3,  # S dt^3/6
+                b1 + dt * b2 + s * h * 2 / 3,  # S dt^3/3
+                b2 + s * dt / 2,  # S dt^2/2
+                p22 + s)  # S dt
+
+    def _covariance(self, dt: float, vel: bool) -> None:
+        """One step of the shared covariance: the gain into self._K, the posterior into self._P."""
+        k, self._P = measurement_update(self._prior(dt), self._r * self._r,
+                                        self._r_v * self._r_v if vel else None)
+        g = self._K
+        if vel:
+            g[0, 0], g[0, 1], g[1, 0], g[1, 1], g[2, 0], g[2, 1] = k
+        else:
+            g[0, 0], g[1, 0], g[2, 0] = k
 
     # -- update ---------------------------------------------------------------------------
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
@@ -224,9 +268,11 @@ class KalmanCA(StateEstimator):
             np.subtract(q, t3[0], out=e[0])
             # the gate; the sum of squares (one call) rules most samples out: threshold > floor
             if self._armed and self._gate_left and float(np.dot(e[0], e[0])) > _FLOOR2:
-                self._gain(dt, vel)  # the gate threshold of this dt and noise
+                if self._P is None:
+                    self._start_covariance(dt, vel)
+                gate = GATE_SIGMAS * math.sqrt(self._prior(dt)[0] + self._r * self._r) + GATE_FLOOR_RAD
                 np.abs(e[0], out=self._tmp)
-                if self._tmp.max() > self._gate:  # a discontinuity: start again from here
+                if self._tmp.max() > gate:  # a discontinuity: start again from here
                     self._gate_left -= 1
                     self.discontinuities += 1
                     self._qfrom, self._vfrom = self._qcount, self._vcount
@@ -254,11 +300,14 @@ class KalmanCA(StateEstimator):
             self._gate_left = GATE_MAX_PER_WINDOW
             if self._online:
                 self._update_noise(vel)
-        k = self._gain(dt, vel)
-        m = k.shape[1]
+        if self._P is None:
+            self._start_covariance(dt, vel)
+        self._covariance(dt, vel)
         if vel:
             np.subtract(qd, t3[1], out=e[1])
-        np.dot(k, e[:m], out=x)  # correct
+            np.dot(self._K, e, out=x)  # correct
+        else:
+            np.dot(self._K1, self._E1, out=x)
         x += t3
         np.copyto(self._out, x)  # outputs are copies: predict() may overwrite them
         self._count += 1
@@ -270,7 +319,8 @@ class KalmanCA(StateEstimator):
         return self._fixed_r is None or self._fixed_rv is None
 
     def _noise_input(self, q: np.ndarray, qd: np.ndarray | None) -> None:
-        """Per joint mean squares of the 3rd difference of positions (2nd of velocities)."""
+        """Per joint mean squares of the 3rd difference of positions, and of the velocities' 2nd
+        difference scaled to r_v^2 (see the module docstring)."""
         if not self._online:
             return
         tmp = self._tmp
@@ -286,9 +336,16 @@ class KalmanCA(StateEstimator):
             h = self._vcount % 3
             np.copyto(self._vring[h], qd)
             self._vcount += 1
-            if self._vcount - self._vfrom >= 3 and self._vcount % self._stride == 0:  # qd - 2 v1 + v2
-                np.dot(self._d2[h], self._vring, out=tmp)
+            vdt, self._vdt = self._vdt, self._dt  # the step before this one, and this one
+            if self._vcount - self._vfrom >= 3 and self._vcount % self._stride == 0:
+                rho = self._dt / vdt  # v0 - v1 - rho (v1 - v2): 0 for constant acceleration
+                v1, v2 = self._vring[(h - 1) % 3], self._vring[(h - 2) % 3]
+                np.subtract(v1, v2, out=self._tmp2)
+                self._tmp2 *= rho
+                np.subtract(qd, v1, out=tmp)
+                tmp -= self._tmp2
                 tmp *= tmp
+                tmp *= 1.0 / (1.0 + (1.0 + rho) ** 2 + rho * rho)  # its variance: r_v^2 (white noise)
                 self._ms_add(self._ms_v, tmp, self._vcount - 2)
 
     def _ms_add(self, ms: np.ndarray, sq: np.ndarray, k: int) -> None:
@@ -301,19 +358,22 @@ class KalmanCA(StateEstimator):
     def _update_noise(self, vel: bool) -> None:
         if self._fixed_r is None and self._qcount >= 7:
             self._r = max(math.sqrt(max(float(np.median(self._ms)), 0.0) / 20.0), self._floor)
-            self._last_gain = None
             self._armed = True
         if vel and self._fixed_rv is None and self._vcount >= 6:
-            self._r_v = max(math.sqrt(max(float(np.median(self._ms_v)), 0.0) / 6.0), self._floor)
-            self._last_gain = None
+            self._r_v = max(math.sqrt(max(float(np.median(self._ms_v)), 0.0)), self._floor)
+        r, r_v = self._seat
+        if abs(math.log(self._r / r)) > _RESEAT or (vel and abs(math.log(self._r_v / r_v)) > _RESEAT):
+            self._P = None  # re-seated at the next step: the steady state of the new belief
 
     # -- description ------------------------------------------------------------------------
     def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
         """q, qd: 0 (exact for constant acceleration); qdd: steady-state error / jerk."""
-        r_v = self._r_v if velocity_given else None
-        key = (round(math.log(dt) / _DT_STEP), round(math.log(self._r) / _NOISE_STEP),
-               None if r_v is None else round(math.log(r_v) / _NOISE_STEP))
-        k, _ = steady_state(*_unbucket(key), self.psd)  # the gain the filter uses at this dt
+        rv2 = self._r_v * self._r_v if velocity_given else None
+        if self._P is None:  # no sample yet: the steady-state gain it will start with
+            k, _ = steady_state(dt, self._r, None if rv2 is None else self._r_v, self.psd)
+        else:  # the gain the filter uses at this dt now (no Riccati solve on a node's thread)
+            g, _ = measurement_update(self._prior(dt), self._r * self._r, rv2)
+            k = np.array(g).reshape(3, 1 if rv2 is None else 2)
         h = (np.array([[1.0, 0.0, 0.0]]) if not velocity_given
              else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
         f = transition(dt)
