@@ -90,6 +90,8 @@ def choices() -> list[tuple[Variant, str]]:
         (Variant("default"), "EventsExecutor, reliable depth 1000, Fast DDS default transports"),
         (Variant("single_executor", node_args=["-p", "executor:=single"]),
          "SingleThreadedExecutor in torque_node"),
+        (Variant("backward_estimator", node_args=["-p", "estimator:=backward"]),
+         "the backward-difference estimator instead of the default kalman (its cost in the node)"),
         (Variant("best_effort", node_args=["-p", "qos_reliable:=false"], best_effort=True),
          "best-effort joint_states and joint_torques"),
         (Variant("depth_10", node_args=["-p", "qos_depth:=10"]),

@@ -10,10 +10,13 @@ tests (test/rosproc.py) start every node through `Child`.
   by its own PID only: SIGINT, then SIGKILL if it hangs. Never by name.
 - `Sampler`: CPU time and memory of some PIDs from /proc, the machine's busy time and load
   average, in a thread; what the benchmarks report next to their figures.
+- `lease_domain`: a ROS domain id no other process on this machine holds through it (an
+  flock per id), so two test sessions run at once never share a domain by chance.
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import signal
 import subprocess
@@ -46,6 +49,51 @@ def ros_env(domain: int, log_dir: Path | str, extra: dict[str, str] | None = Non
     )
     env.update(extra or {})
     return env
+
+
+@dataclass
+class DomainLease:
+    """A ROS domain id held by this process until release() or its exit (the kernel drops an
+    flock with its process, so a killed session frees its domains by itself)."""
+
+    domain: int
+    _fd: int | None = None
+
+    @property
+    def exclusive(self) -> bool:
+        """False when every id of the range was held and this one is shared."""
+        return self._fd is not None
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # closing the descriptor drops the lock
+            self._fd = None
+
+
+def lease_domain(lo: int, hi: int, start: int | None = None) -> DomainLease:
+    """The first free id of lo..hi, trying from lo + start % (hi - lo + 1) (default: the pid).
+
+    Free = no other process holds it through lease_domain (a lock file per id in the temp
+    directory). When all are held the start id is returned, shared (`exclusive` False):
+    sharing a domain is slower, not wrong, for nodes in their own namespaces.
+    """
+    ids = range(lo, hi + 1)
+    first = (os.getpid() if start is None else start) % len(ids)
+    lock_dir = Path(tempfile.gettempdir()) / "forearm_dynamics_domains"
+    for i in range(len(ids)):
+        domain = ids[(first + i) % len(ids)]
+        try:
+            lock_dir.mkdir(exist_ok=True)
+            fd = os.open(lock_dir / f"{domain}.lock", os.O_RDWR | os.O_CREAT, 0o666)  # not inherited
+        except OSError:  # no usable temp directory: share, as when all are held
+            break
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            continue
+        return DomainLease(domain, fd)
+    return DomainLease(ids[first])
 
 
 def _new_file(directory: Path, stem: str, suffix: str) -> Path:

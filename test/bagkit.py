@@ -13,16 +13,18 @@ from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.bag import BagWriter, TopicQos
+from forearm_dynamics.processes import lease_domain
 
 #: A namespace of this test session: other sessions on the machine may share the ROS domain
 #: (rosproc.domain_id() is derived from the pid), never this namespace.
 NS = f"/replay_test_{os.getpid()}"
 
 #: The ROS domain of the replay tests: 230..232, which no other test file uses (rosproc
-#: 1..101, faultkit 102..139, test_bag_recorder 140..229). Sessions of other test files on
-#: the same domain were seen to stall these 1 kHz streams (joint runs of the suite on this
-#: shared machine), even in other namespaces.
-DOMAIN = 230 + os.getpid() % 3
+#: 1..101, faultkit 102..139, test_bag_recorder 140..229), leased for the session. Sessions
+#: of other test files on the same domain were seen to stall these 1 kHz streams (joint runs
+#: of the suite on this shared machine), even in other namespaces.
+_LEASE = lease_domain(230, 232)  # held for the session
+DOMAIN = _LEASE.domain
 
 MS = 1_000_000
 T0 = 1_700_000_000_000_000_000

@@ -8,8 +8,6 @@ by its own PID only.
 
 from __future__ import annotations
 
-import itertools
-import os
 import signal
 import struct
 import subprocess
@@ -30,12 +28,10 @@ MODEL = build_model("segmented", 50)
 POSTURE = np.random.default_rng(11).uniform(-0.4, 0.7, 20)
 GRAVITY = MODEL.gravity_torques(POSTURE)
 
-_counter = itertools.count()
-
 
 def private_domain() -> int:
-    """A ROS domain for one test (102..139), never 0, distinct between tests of a session."""
-    return 102 + (os.getpid() * 7 + next(_counter)) % 38
+    """A ROS domain for one test (102..139), never 0, held by no other test or session."""
+    return rosproc.test_domain(102, 139)
 
 
 def stamp_of(msg) -> int:

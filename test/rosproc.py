@@ -8,6 +8,7 @@ other and nothing leaves loopback. Processes are stopped by their own PID only.
 from __future__ import annotations
 
 import atexit
+import itertools
 import os
 import shutil
 import signal
@@ -17,16 +18,36 @@ import time
 from pathlib import Path
 
 from forearm_dynamics import processes
-from forearm_dynamics.processes import BIN, Child
+from forearm_dynamics.processes import BIN, Child, DomainLease, lease_domain
 
-__all__ = ["BIN", "NodeProcess", "Peer", "apply_to_this_process", "domain_id", "ros_env", "start"]
+__all__ = ["BIN", "NodeProcess", "Peer", "apply_to_this_process", "domain_id", "ros_env", "start",
+           "test_domain"]
+
+
+_session_lease: DomainLease | None = None
+_test_leases: dict[tuple[int, int], DomainLease] = {}
+_counter = itertools.count()
 
 
 def domain_id() -> int:
-    """1..101, stable for this test process (0 is avoided: it is everyone's default)."""
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
-    seed = os.getpid() * 7 + (int(worker) if worker.isdigit() else 0)
-    return 1 + seed % 101
+    """1..101, stable for this test process (0 is avoided: it is everyone's default); leased
+    (processes.lease_domain), so a second test session on the machine gets another one."""
+    global _session_lease
+    if _session_lease is None:
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+        seed = os.getpid() * 7 + (int(worker) if worker.isdigit() else 0)
+        _session_lease = lease_domain(1, 101, seed)
+    return _session_lease.domain
+
+
+def test_domain(lo: int, hi: int) -> int:
+    """A domain of lo..hi for one test: leased, and held until the next call for that range
+    (tests run one after the other in a session), so concurrent sessions never share it."""
+    old = _test_leases.pop((lo, hi), None)
+    if old is not None:
+        old.release()
+    lease = _test_leases[(lo, hi)] = lease_domain(lo, hi, os.getpid() * 7 + next(_counter))
+    return lease.domain
 
 
 _LOG_DIR = Path(tempfile.mkdtemp(prefix="forearm_test_roslog_"))

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
-import os
 import signal
 import subprocess
 import sys
@@ -56,12 +54,11 @@ node.destroy_node()
 rclpy.shutdown()
 """
 
-_counter = itertools.count()
 
 
 def private_domain() -> int:
     """A domain per test, outside rosproc's 1..101, so parallel sessions do not mix."""
-    return 140 + (os.getpid() * 7 + next(_counter)) % 90
+    return rosproc.test_domain(140, 229)
 
 
 def start_publisher(tmp_path: Path, domain: int, duration: float) -> tuple[subprocess.Popen, Path, Path]:

@@ -1,6 +1,6 @@
-"""A noisy, positions-only, slow sensor through the torque node with the estimator the
-README recommends for measured input (RECOMMENDED_FOR_MEASURED_INPUT, `kalman`; every other
-parameter at its default): real processes over loopback DDS.
+"""A noisy, positions-only, slow sensor through the torque node with default parameters
+(its estimator: DEFAULT_ESTIMATOR, `kalman`, which is also RECOMMENDED_FOR_MEASURED_INPUT):
+real processes over loopback DDS.
 
 trajectory_publisher plays movements as a motion-capture-like sensor (100 Hz, 0.5 deg
 Gaussian noise on every position, no velocities); torque_node runs with no parameter at all.
@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES, build_model, get_movement
-from forearm_dynamics.estimation import RECOMMENDED_FOR_MEASURED_INPUT as RECOMMENDED
+from forearm_dynamics.estimation import DEFAULT_ESTIMATOR, RECOMMENDED_FOR_MEASURED_INPUT
 from forearm_dynamics.nodes.common import stream_qos
 from forearm_dynamics.nodes.trajectory_publisher import marker_qos
 
@@ -40,7 +40,7 @@ def stamp_ns(msg) -> int:
 
 @pytest.fixture(scope="module")
 def run():
-    node = rosproc.start("torque_node", "-p", f"estimator:={RECOMMENDED}")
+    node = rosproc.start("torque_node")  # no parameter: the defaults a user gets
     peer = rosproc.Peer("measured_input_test")
     outputs: list[JointState] = []
     markers: list[dict] = []
@@ -72,8 +72,9 @@ def run():
     return outputs, markers, node.output()
 
 
-def test_recommended_estimator_gives_torques_near_the_noiseless_truth(run) -> None:
+def test_default_node_gives_torques_near_the_noiseless_truth(run) -> None:
     outputs, markers, log = run
+    assert DEFAULT_ESTIMATOR == RECOMMENDED_FOR_MEASURED_INPUT
     assert [m["id"] for m in markers] == MOVEMENTS
     assert all(m["sensor"]["noise_deg"] == 0.5 and not m["sensor"]["publish_velocity"]
                for m in markers)
@@ -94,7 +95,7 @@ def test_recommended_estimator_gives_torques_near_the_noiseless_truth(run) -> No
     rmse = np.sqrt((err ** 2).mean(axis=0))
     ptp = np.ptp(truth[scored], axis=0)
     nrmse = {name: rmse[i] / ptp[i] for i, name in enumerate(JOINT_NAMES)}
-    print(f"\nglobal torque NRMSE, {RECOMMENDED}, {RATE_HZ:g} Hz, 0.5 deg, positions only: "
+    print(f"\nglobal torque NRMSE, {DEFAULT_ESTIMATOR}, {RATE_HZ:g} Hz, 0.5 deg, positions only: "
           f"elbow {100 * nrmse['elbow_flexion']:.1f} %, pro/sup {100 * nrmse['pro_sup']:.1f} %")
     assert nrmse["elbow_flexion"] < BOUND and nrmse["pro_sup"] < BOUND, nrmse
-    assert f"estimator {RECOMMENDED}" in log
+    assert f"estimator {DEFAULT_ESTIMATOR}" in log

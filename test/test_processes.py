@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from forearm_dynamics.processes import Child, Sampler, proc_stat, ros_env
+from forearm_dynamics.processes import Child, Sampler, lease_domain, proc_stat, ros_env
 
 #: Prints "ready", then sleeps; with "stubborn" it ignores SIGINT.
 SLEEPER = (
@@ -40,6 +40,36 @@ def test_ros_env_is_loopback_in_its_own_domain(tmp_path, monkeypatch) -> None:
     for bad in (0, 233, -1):
         with pytest.raises(ValueError, match="1..232"):
             ros_env(bad, tmp_path)
+
+
+HOLDER = (  # leases a domain of 225..226 from a given start, prints it, holds it
+    "import sys, time\n"
+    "from forearm_dynamics.processes import lease_domain\n"
+    "lease = lease_domain(225, 226, int(sys.argv[1]))\n"
+    "print(lease.domain, lease.exclusive, flush=True); time.sleep(60)\n"
+)
+
+
+def test_lease_domain_is_exclusive_across_processes_until_released(tmp_path) -> None:
+    """A second session never gets a domain another process holds; a dead holder's domain
+    is free again (the kernel drops its lock); all held: shared, and said so."""
+    holder = Child("holder", [sys.executable, "-c", HOLDER, "0"], ros_env(42, tmp_path), tmp_path)
+    try:
+        assert holder.wait_for("True", 30), holder.text()
+        held = int(holder.stdout().split()[0])
+        mine = lease_domain(225, 226, held - 225)  # asks for the held one first
+        assert mine.exclusive and mine.domain != held and mine.domain in (225, 226)
+        full = lease_domain(225, 226)
+        assert not full.exclusive and full.domain in (225, 226)
+        mine.release()
+        again = lease_domain(225, 226, held - 225)
+        assert again.exclusive and again.domain == mine.domain
+        again.release()
+    finally:
+        holder.stop(signal.SIGKILL)
+    after = lease_domain(225, 226, held - 225)
+    assert after.exclusive and after.domain == held
+    after.release()
 
 
 def test_start_wait_for_and_stop(tmp_path) -> None:

@@ -33,7 +33,8 @@ warm after 3 samples (2 with velocities), as the backward difference.
 Noise: kalman_noise_deg > 0 fixes the position noise std (degrees); 0 estimates it online:
 per joint an exponentially weighted mean (time constant 2 s) of the squared third
 difference of the raw positions (= 20 r^2 for white noise when the signal is smooth;
-taken at every 4th sample above 400 Hz, which is plenty and saves time),
+above ~400 Hz from one window of consecutive samples in 8, which is plenty: only the
+samples of a window are copied, ~2 us per sample saved at 1 kHz),
 the median over joints every 0.25 s (most joints are still at any time, so motion hardly
 biases it), floored at kalman_noise_floor_deg. Velocity noise likewise from the given
 velocities, or fixed by kalman_velocity_noise_dps: v0 - v1 - rho (v1 - v2), rho = dt0/dt1
@@ -93,7 +94,9 @@ from .base import SettingSpec, StateEstimator
 _RESEAT = math.log(1.12)  # a noise belief this much (12 %) off P's seat re-seats P
 _NOISE_TAU_S = 2.0
 _NOISE_EVERY_S = 0.25
-_NOISE_MIN_DT_S = 2.5e-3
+_NOISE_STRIDE = 8  # above ~400 Hz the noise statistics use one difference per 8 samples:
+_NOISE_FAST_DT_S = 2.0e-3  # from stride 1 to 8 below this dt,
+_NOISE_SLOW_DT_S = 3.0e-3  # back to 1 above this one
 GATE_SIGMAS = 12.0  # discontinuity: innovation > GATE_SIGMAS sigma + GATE_FLOOR_RAD (any joint)
 GATE_FLOOR_RAD = 0.15
 _FLOOR2 = GATE_FLOOR_RAD**2
@@ -292,7 +295,10 @@ class KalmanCA(StateEstimator):
             return False
         self._dt = dt
         self._t_ns = t_ns
-        self._stride = 1 if dt > _NOISE_MIN_DT_S else 4  # statistics from every 4th sample at > 400 Hz
+        stride = self._stride  # noise statistics from every 8th sample above ~400 Hz (hysteresis)
+        if (dt < _NOISE_FAST_DT_S) if stride == 1 else (dt > _NOISE_SLOW_DT_S):
+            self._stride = _NOISE_STRIDE if stride == 1 else 1
+            self._qfrom, self._vfrom = self._qcount, self._vcount  # fresh windows at the new stride
         self._noise_input(q, qd)
         self._since_noise += dt
         if self._since_noise >= _NOISE_EVERY_S:
@@ -323,30 +329,32 @@ class KalmanCA(StateEstimator):
         difference scaled to r_v^2 (see the module docstring)."""
         if not self._online:
             return
-        tmp = self._tmp
+        tmp, stride = self._tmp, self._stride
         if self._fixed_r is None:
-            h = self._qcount % 4
-            np.copyto(self._ring[h], q)
-            self._qcount += 1
-            if self._qcount - self._qfrom >= 4 and self._qcount % self._stride == 0:  # q - 3 q1 + 3 q2 - q3
-                np.dot(self._d3[h], self._ring, out=tmp)
-                tmp *= tmp
-                self._ms_add(self._ms, tmp, self._qcount - 3)
+            c = self._qcount = self._qcount + 1
+            h = (c - 1) % 4
+            if (-c) % stride < 4:  # one of the 4 samples whose difference is taken (all at stride 1)
+                np.copyto(self._ring[h], q)
+                if c % stride == 0 and c - self._qfrom >= 4:  # q - 3 q1 + 3 q2 - q3
+                    np.dot(self._d3[h], self._ring, out=tmp)
+                    tmp *= tmp
+                    self._ms_add(self._ms, tmp, c - 3)
         if qd is not None and self._fixed_rv is None:
-            h = self._vcount % 3
-            np.copyto(self._vring[h], qd)
-            self._vcount += 1
+            c = self._vcount = self._vcount + 1
+            h = (c - 1) % 3
             vdt, self._vdt = self._vdt, self._dt  # the step before this one, and this one
-            if self._vcount - self._vfrom >= 3 and self._vcount % self._stride == 0:
-                rho = self._dt / vdt  # v0 - v1 - rho (v1 - v2): 0 for constant acceleration
-                v1, v2 = self._vring[(h - 1) % 3], self._vring[(h - 2) % 3]
-                np.subtract(v1, v2, out=self._tmp2)
-                self._tmp2 *= rho
-                np.subtract(qd, v1, out=tmp)
-                tmp -= self._tmp2
-                tmp *= tmp
-                tmp *= 1.0 / (1.0 + (1.0 + rho) ** 2 + rho * rho)  # its variance: r_v^2 (white noise)
-                self._ms_add(self._ms_v, tmp, self._vcount - 2)
+            if (-c) % stride < 3:
+                np.copyto(self._vring[h], qd)
+                if c % stride == 0 and c - self._vfrom >= 3:
+                    rho = self._dt / vdt  # v0 - v1 - rho (v1 - v2): 0 for constant acceleration
+                    v1, v2 = self._vring[(h - 1) % 3], self._vring[(h - 2) % 3]
+                    np.subtract(v1, v2, out=self._tmp2)
+                    self._tmp2 *= rho
+                    np.subtract(qd, v1, out=tmp)
+                    tmp -= self._tmp2
+                    tmp *= tmp
+                    tmp *= 1.0 / (1.0 + (1.0 + rho) ** 2 + rho * rho)  # variance r_v^2 (white noise)
+                    self._ms_add(self._ms_v, tmp, c - 2)
 
     def _ms_add(self, ms: np.ndarray, sq: np.ndarray, k: int) -> None:
         """Running mean over the first samples, then exponential (time constant _NOISE_TAU_S)."""
