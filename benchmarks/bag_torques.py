@@ -51,7 +51,7 @@ def main() -> int:
            "when": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
            "machine": {"cpus": os.cpu_count(), "loadavg_before": load_before},
            "samples": args.samples, "read_s": read_s, "read_samples_per_s": args.samples / read_s}
-    for est in ("backward", "zero_phase"):
+    for est in ("kalman", "backward", "zero_phase"):  # kalman: the default
         res = compute(stream, arm, est)
         t = time.perf_counter()
         bag_torques(src, work / f"out_{est}.mcap", arm, estimator=est)
