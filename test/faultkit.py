@@ -34,6 +34,20 @@ def private_domain() -> int:
     return rosproc.test_domain(102, 139)
 
 
+def recorded(path: Path, topic: str, after_ns: int = 0) -> int:
+    """Messages on topic logged after after_ns in the recording at path, also while it is
+    being written (its closed chunks are read as a truncated file is); 0 while unreadable.
+
+    A recorder may match a writer that joined the graph only at Fast DDS's next participant
+    announcement (~3 s, later on a loaded machine): tests wait on this, not on a fixed time."""
+    from forearm_dynamics.bag import BagError, open_bag
+
+    try:
+        return sum(m.log_time > after_ns for _ch, m in open_bag(path).messages([topic]))
+    except BagError:
+        return 0
+
+
 def stamp_of(msg) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 

@@ -30,6 +30,7 @@ from faultkit import (
     check_torque_stream,
     joint_series,
     private_domain,
+    recorded,
 )
 from rclpy.serialization import deserialize_message
 from rosbags.rosbag2 import Reader
@@ -72,15 +73,12 @@ class Watch:
 
     def wait_recorded(self, path: Path, topic: str, after_ns: int, timeout: float = 30.0) -> bool:
         """Spin until the recording in progress at path holds a message on topic logged after
-        after_ns (its closed chunks are read as a truncated file is)."""
+        after_ns (faultkit.recorded)."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             self.peer.spin_for(0.5)
-            try:
-                if any(m.log_time > after_ns for _ch, m in open_bag(path).messages([topic])):
-                    return True
-            except BagError:  # not yet readable: keep waiting
-                pass
+            if recorded(path, topic, after_ns):
+                return True
         return False
 
     def close(self) -> None:
