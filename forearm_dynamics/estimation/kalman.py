@@ -13,11 +13,8 @@ update) in plain float arithmetic, ~40 multiplications (a few us), and the updat
 small matrix products on the stacked state X = [q; qd; qdd] (3, n): X = F X (predict),
 X += K E (correct with the innovations E). So every sample gets the exact gain of its own
 dt and the current noise belief: a jittered stream, a dropped sample (one 2 dt step) or a
-new noise estimate costs nothing extra. (Before: steady-state gains from
-scipy.linalg.solve_discrete_are cached by dt and noise bucket. Under a real 1 kHz
-stream's stamp jitter the buckets kept missing: ~10 Riccati solves (1-2 ms each) per
-second inside the callback, each waking OpenBLAS threads that then spun for a core:
-torque_node at 105 % CPU with a 3 ms callback p99.) Start: P is the steady-state
+new noise estimate costs nothing extra (gains cached by dt bucket, the first version,
+missed on every jittered 1 kHz stream: Riccati solves in the callback; README). Start: P is the steady-state
 covariance of the first step's dt (solve_discrete_are, once per estimator; a reset keeps
 P, since the sensor did not change), so a stream that starts at rest has no start-up
 transient (a time-varying warm-up from a wide prior would put the noise of raw

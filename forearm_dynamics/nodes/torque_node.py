@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import json
 import math
-import threading
 import time
 
 import numpy as np
@@ -54,6 +53,7 @@ from std_msgs.msg import String
 from . import validation as v
 from .common import latched_qos, main_for, package_version
 from .diagnostics import diagnostic_array
+from .model_builder import ModelBuilder
 from .params import ParameterError, Params
 from .stream_node import NODE_CONFIG_TOPIC, STREAM_SPECS, JointStreamNode
 from .torque_config import (
@@ -87,7 +87,7 @@ class TorqueNode(JointStreamNode):
         self._version = package_version()
         self._announce: ModelBundle | None = None  # installed, not yet stated with its stamp
         self._publish_config(self._bundle, 0)
-        self._worker = _Builder(self)
+        self._worker = ModelBuilder(self)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         if self.output_rate_hz > 0:
@@ -355,56 +355,6 @@ class TorqueNode(JointStreamNode):
             rclpy.logging.get_logger(f"{self.get_name()}.shutdown").info(
                 f"timer outputs skipped: {skipped or 'none'}")
         super().destroy_node()
-
-
-class _Builder:
-    """One worker thread that builds requested bundles; the newest request wins."""
-
-    def __init__(self, node: TorqueNode):
-        self._node = node
-        self._cv = threading.Condition()
-        self._request: ModelRequest | None = None
-        self._announcements: list[tuple[ModelBundle, int]] = []
-        self._stop = False
-        self._thread = threading.Thread(target=self._run, name="model_builder", daemon=True)
-        self._thread.start()
-
-    def submit(self, request: ModelRequest) -> None:
-        with self._cv:
-            self._request = request
-            self._cv.notify()
-
-    def announce(self, bundle: ModelBundle, stamp_ns: int) -> None:
-        """Publish `bundle`'s config as applied from `stamp_ns` (off the executor thread)."""
-        with self._cv:
-            self._announcements.append((bundle, stamp_ns))
-            self._cv.notify()
-
-    def stop(self) -> None:
-        with self._cv:
-            self._stop = True
-            self._cv.notify()
-        self._thread.join(timeout=2.0)
-
-    def _run(self) -> None:
-        while True:
-            with self._cv:
-                while self._request is None and not self._announcements and not self._stop:
-                    self._cv.wait()
-                if self._stop:
-                    return
-                announcements, self._announcements = self._announcements, []
-                request, self._request = self._request, None
-            for bundle, stamp_ns in announcements:
-                self._node._publish_config(bundle, stamp_ns)
-            if request is None:
-                continue
-            # Measured (benchmarks/torque_node_rate.py, 2 loaded cores): a build (~2-5 ms)
-            # delays the samples that arrive meanwhile by ~2 ms (p50) whatever is tried:
-            # sys.setswitchinterval(1e-5 or 1e-3) during the build only made it slower
-            # (request -> first new sample ~8 ms instead of ~4 ms), and this thread at nice
-            # 19 was worse still (it holds the GIL while descheduled). So: plain.
-            self._node.build(request)
 
 
 def main() -> None:
