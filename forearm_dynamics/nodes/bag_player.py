@@ -158,6 +158,7 @@ class BagPlayer(Node):
         self.sent = np.zeros(len(self.pubs), np.int64)
         self.late_ns: list[int] = []
         self.loops = 0
+        self._completed = False  # played to the end (not stopped by a signal or an error)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._play, name="bag_player", daemon=True)
         pl = self.playlist
@@ -206,6 +207,7 @@ class BagPlayer(Node):
                         break
             if not self._stop.is_set():
                 self._finish()
+                self._completed = True
         except Exception as exc:  # noqa: BLE001 - a shut-down context ends the playback
             if rclpy.ok() and not self._stop.is_set():
                 self.get_logger().error(f"playback failed: {type(exc).__name__}: {exc}")
@@ -272,11 +274,12 @@ class BagPlayer(Node):
                 f"max {late.max():.3f} ms")
 
     def destroy_node(self) -> None:
-        finished = self.done.done()
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
-        if not finished:  # stopped (SIGINT): the context is gone, log through a plain logger
+        # Not "done.done()": a SIGINT shuts the context down, the playback thread's next
+        # publish fails and it completes `done` too, racing this check (seen under load).
+        if not self._completed:  # stopped (SIGINT): the context is gone, log through a plain logger
             rclpy.logging.get_logger(NAME).info("stopped; " + self.summary().removeprefix("done: "))
         super().destroy_node()
 
