@@ -280,16 +280,21 @@ def joint_series(bag, topic: str) -> dict[str, np.ndarray]:
     return out
 
 
-def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * MS) -> int:
+def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * MS,
+                        prev: tuple[int, np.ndarray] | None = None) -> int:
     """Every recorded torque is exactly what torque_node (backward estimator) must compute
     from the sample it carries and the one before it: qdd = backward difference of velocity
     over the stamps, 0 after a pause (warm-up). A pause is the node's adaptive stamp gap
     (its default): longer than max_gap_ns AND GAP_PERIODS x the previous interval (a stalled
-    publisher's slow samples are not pauses). Returns the number of warm-up samples."""
+    publisher's slow samples are not pauses). `prev` (stamp, velocity): the sample the node
+    answered before the first one of the series (its answer not in the series), else the
+    first is a warm-up. Returns the number of warm-up samples."""
     from forearm_dynamics.nodes.stream_node import GAP_PERIODS
 
     t, pos, vel, eff = series["stamp"], series["position"], series["velocity"], series["effort"]
     assert len(t) and np.all(np.diff(t) > 0), "torques out of order or repeated"
+    if prev is not None:  # the sample before, for the first difference only
+        t, vel = np.concatenate([[prev[0]], t]), np.vstack([prev[1], vel])
     qdd = np.zeros_like(vel)
     dt = np.diff(t)
     cont = np.empty(len(dt), bool)
@@ -299,6 +304,9 @@ def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * M
         last_dt = d if cont[k] else 0
     step = (vel[1:] - vel[:-1]) * (1.0 / (dt * 1e-9))[:, None]
     qdd[1:][cont] = step[cont]
+    if prev is not None:
+        t, vel, qdd = t[1:], vel[1:], qdd[1:]
+        cont = cont[1:]
     expected = MODEL.inverse_dynamics(pos, vel, qdd)
     err = np.abs(eff - expected).max(axis=1)
     bad = np.flatnonzero(~(err < 1e-8))
