@@ -70,7 +70,7 @@ class DomainLease:
             self._fd = None
 
 
-def lease_domain(lo: int, hi: int, start: int | None = None) -> DomainLease:
+def lease_domain(lo: int, hi: int, start: int | None = None, lock_dir: Path | None = None) -> DomainLease:
     """The first free id of lo..hi, trying from lo + start % (hi - lo + 1) (default: the pid).
 
     Free = no other process holds it through lease_domain (a lock file per id in the temp
@@ -79,7 +79,7 @@ def lease_domain(lo: int, hi: int, start: int | None = None) -> DomainLease:
     """
     ids = range(lo, hi + 1)
     first = (os.getpid() if start is None else start) % len(ids)
-    lock_dir = Path(tempfile.gettempdir()) / "forearm_dynamics_domains"
+    lock_dir = lock_dir or Path(tempfile.gettempdir()) / "forearm_dynamics_domains"  # a test: its own
     for i in range(len(ids)):
         domain = ids[(first + i) % len(ids)]
         try:

@@ -368,7 +368,7 @@ def test_5khz_input_for_10s(procs, tmp_path) -> None:
         # it alone (a slow reader, not a lost sample)
         answered = {int(s) for s in Path(str(stamps_file) + ".answers").read_text().split()}
         missing = [s for s in sent if s not in answered]
-        assert received == processed == 50_000, (received, processed)
+        assert received == processed == 50_000, (received, processed, fast.domain, before, diag)
         assert not missing, f"{len(missing)} of 50000 samples unanswered"
         checked = [s for s in sent[::97] if s in got]
         assert len(checked) > 0.5 * len(sent[::97])

@@ -44,8 +44,9 @@ def test_ros_env_is_loopback_in_its_own_domain(tmp_path, monkeypatch) -> None:
 
 HOLDER = (  # leases a domain of 225..226 from a given start, prints it, holds it
     "import sys, time\n"
+    "from pathlib import Path\n"
     "from forearm_dynamics.processes import lease_domain\n"
-    "lease = lease_domain(225, 226, int(sys.argv[1]))\n"
+    "lease = lease_domain(225, 226, int(sys.argv[1]), Path(sys.argv[2]))\n"
     "print(lease.domain, lease.exclusive, flush=True); time.sleep(60)\n"
 )
 
@@ -53,21 +54,23 @@ HOLDER = (  # leases a domain of 225..226 from a given start, prints it, holds i
 def test_lease_domain_is_exclusive_across_processes_until_released(tmp_path) -> None:
     """A second session never gets a domain another process holds; a dead holder's domain
     is free again (the kernel drops its lock); all held: shared, and said so."""
-    holder = Child("holder", [sys.executable, "-c", HOLDER, "0"], ros_env(42, tmp_path), tmp_path)
+    locks = tmp_path / "locks"  # this test's own lock files: another session may run it too
+    holder = Child("holder", [sys.executable, "-c", HOLDER, "0", str(locks)], ros_env(42, tmp_path),
+                   tmp_path)
     try:
         assert holder.wait_for("True", 30), holder.text()
         held = int(holder.stdout().split()[0])
-        mine = lease_domain(225, 226, held - 225)  # asks for the held one first
+        mine = lease_domain(225, 226, held - 225, locks)  # asks for the held one first
         assert mine.exclusive and mine.domain != held and mine.domain in (225, 226)
-        full = lease_domain(225, 226)
+        full = lease_domain(225, 226, None, locks)
         assert not full.exclusive and full.domain in (225, 226)
         mine.release()
-        again = lease_domain(225, 226, held - 225)
+        again = lease_domain(225, 226, held - 225, locks)
         assert again.exclusive and again.domain == mine.domain
         again.release()
     finally:
         holder.stop(signal.SIGKILL)
-    after = lease_domain(225, 226, held - 225)
+    after = lease_domain(225, 226, held - 225, locks)
     assert after.exclusive and after.domain == held
     after.release()
 
