@@ -28,6 +28,12 @@ latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 config = node.create_publisher(String, "torque_node/config", latched)
 config.publish(String(data='{"model": "segmented"}'))  # before the recorder exists
+# movement markers as trajectory_publisher sends them (transient local, depth 100), three of
+# them before the recorder exists: a recorder that matches late must still get every one
+markers = node.create_publisher(String, "movement", QoSProfile(
+    depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+for k in range(3):
+    markers.publish(String(data=f'{{"id": {k + 1}}}'))
 pub = node.create_publisher(JointState, "joint_states", QoSProfile(depth=1000))
 print("waiting", flush=True)
 deadline = time.monotonic() + 30
@@ -111,12 +117,19 @@ def test_sigterm_gives_a_complete_bag(tmp_path, processes) -> None:
     counts = bag.info.topic_counts()
     assert counts["/joint_states"] == published >= 2500
     assert counts["/torque_node/config"] == 1  # latched, published before the recorder
+    # markers published before the recorder: every one, in order (the CI failure: a recorder
+    # subscribed volatile missed the first marker when it matched /movement late)
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import String
+
+    assert [deserialize_message(m.data, String).data for _c, m in bag.messages(["movement"])] == [
+        f'{{"id": {k}}}' for k in (1, 2, 3)]
     with Reader(out) as r:  # the independent reader
         got = {c.topic: c.msgcount for c in r.connections}
         assert got["/joint_states"] == published
-        assert sum(1 for _ in r.messages()) == published + 1
+        assert got["/movement"] == 3
+        assert sum(1 for _ in r.messages()) == published + 4
     # what was published is what was recorded, in order (stamps inside the CDR payload)
-    from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import JointState
 
     recorded = [deserialize_message(m.data, JointState).header.stamp for _c, m in

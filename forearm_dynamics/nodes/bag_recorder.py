@@ -7,10 +7,13 @@ to a raw callback under the EventsExecutor, and every stamped message keeps its 
 header stamp inside the payload (check_bag's latency = log_time - header stamp).
 
 Topics (parameter `topics`): the five the pipeline uses by default; an entry is 'name'
-for those or 'name:pkg/msg/Type' for any other. The latched `torque_node/config` is
-subscribed transient-local, so it is recorded even when the recorder starts after the
-torque node. Everything else: reliable, volatile, depth `qos_depth` (1000: a writer
-pause of ~0.5 s at 2 kHz does not drop).
+for those or 'name:pkg/msg/Type' for any other. The latched `torque_node/config` and the
+`movement` markers are subscribed transient-local (depth LATCHED_DEPTH), so what their
+writers keep is recorded even when the recorder matches them late: discovery matches each
+topic on its own, so a publisher that saw the recorder on `joint_states` may send its
+first marker before the recorder's `movement` reader is matched (a CI run lost movement
+3's marker that way). Everything else: reliable, volatile, depth `qos_depth` (1000: a
+writer pause of ~0.5 s at 2 kHz does not drop).
 
 Files: `output` (default forearm_YYYYmmdd_HHMMSS.mcap in the working directory) is
 never overwritten; a missing or unwritable directory is one error line and exit code 2 (USAGE).
@@ -54,6 +57,10 @@ from .params import ParameterError, Params, Spec, init_node
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
+# History a latched subscription takes over when it matches: trajectory_publisher keeps its
+# last 100 markers, the torque node its last config; a burst of history must not overwrite
+# itself in a reader of depth 1 before the callback takes it.
+LATCHED_DEPTH = 100
 KNOWN_TYPES: dict[str, type] = {
     "joint_states": JointState,
     "joint_torques": JointState,
@@ -65,8 +72,8 @@ KNOWN_TYPES: dict[str, type] = {
 SPECS = (
     Spec("topics", list(DEFAULT_TOPICS), "topics to record: 'name' (types known for the "
          "pipeline's topics) or 'name:pkg/msg/Type'"),
-    Spec("latched_topics", [CONFIG_TOPIC], "topics subscribed reliable + transient-local "
-         "(depth 1), so a sample latched before the recorder started is recorded"),
+    Spec("latched_topics", [CONFIG_TOPIC, "movement"], "topics subscribed reliable + "
+         "transient-local (depth 100), so samples latched before the recorder matched are recorded"),
     Spec("output", "", "MCAP file to create ('' = forearm_<date>_<time>.mcap in the working "
          "directory); an existing file is never overwritten"),
     Spec("qos_depth", 1000, "history depth of the stream subscriptions (reliable, volatile)",
@@ -163,7 +170,7 @@ class BagRecorder(Node):
             self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
                                     compression=compression)
             for plan, topic in zip(plans, resolved, strict=True):
-                qos = latched_qos() if plan.latched else stream_qos(depth)
+                qos = latched_qos(LATCHED_DEPTH) if plan.latched else stream_qos(depth)
                 channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
                 self.create_subscription(plan.msg_class, topic, self._callback(channel), qos, raw=True)
             self.create_timer(flush_period, self._flush_if_due)
