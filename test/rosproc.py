@@ -20,12 +20,21 @@ from pathlib import Path
 from forearm_dynamics import processes
 from forearm_dynamics.processes import BIN, Child, DomainLease, lease_domain
 
-__all__ = ["BIN", "NodeProcess", "Peer", "apply_to_this_process", "domain_id", "ros_env", "start",
-           "test_domain"]
+__all__ = [
+    "BIN",
+    "NodeProcess",
+    "Peer",
+    "apply_to_this_process",
+    "domain_id",
+    "release_test_domains",
+    "ros_env",
+    "start",
+    "test_domain",
+]
 
 
 _session_lease: DomainLease | None = None
-_test_leases: dict[tuple[int, int], DomainLease] = {}
+_test_leases: list[DomainLease] = []
 _counter = itertools.count()
 
 
@@ -41,13 +50,20 @@ def domain_id() -> int:
 
 
 def test_domain(lo: int, hi: int) -> int:
-    """A domain of lo..hi for one test: leased, and held until the next call for that range
-    (tests run one after the other in a session), so concurrent sessions never share it."""
-    old = _test_leases.pop((lo, hi), None)
-    if old is not None:
-        old.release()
-    lease = _test_leases[(lo, hi)] = lease_domain(lo, hi, os.getpid() * 7 + next(_counter))
+    """A domain of lo..hi, leased until release_test_domains() (conftest: the end of the test
+    module), so concurrent sessions never share it. Not sooner: a module's fixture may keep a
+    node on its domain while a test takes another (test_faults_input's module harness and
+    its 5 kHz test did; released at the second call, the first domain went to a concurrent
+    session whose nodes then answered in it)."""
+    lease = lease_domain(lo, hi, os.getpid() * 7 + next(_counter))
+    _test_leases.append(lease)
     return lease.domain
+
+
+def release_test_domains() -> None:
+    """Free every test_domain() lease; call once no process started on them runs."""
+    while _test_leases:
+        _test_leases.pop().release()
 
 
 _LOG_DIR = Path(tempfile.mkdtemp(prefix="forearm_test_roslog_"))

@@ -75,6 +75,20 @@ def test_lease_domain_is_exclusive_across_processes_until_released(tmp_path) -> 
     after.release()
 
 
+def test_test_domains_stay_leased_until_released() -> None:
+    """A test's second domain does not free its first (a module's harness may still run on
+    it): both stay held, in this process and for any other, until release_test_domains()."""
+    import rosproc
+
+    first, second = rosproc.test_domain(102, 139), rosproc.test_domain(102, 139)
+    assert first != second
+    for domain in (first, second):
+        other = lease_domain(domain, domain)  # the only id of its range: held, so shared
+        assert not other.exclusive, domain
+    rosproc.release_test_domains()
+    assert rosproc._test_leases == []
+
+
 def test_start_wait_for_and_stop(tmp_path) -> None:
     a, b = sleeper(tmp_path), sleeper(tmp_path, split=True)
     try:
