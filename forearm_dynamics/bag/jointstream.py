@@ -1,7 +1,7 @@
 """A JointState topic of a bag as arrays, fast: stamps, log times, frame ids, q, qd.
 
 The CDR layout of a message shape (names, field counts) is parsed once and checked
-against rclpy's deserialiser (nodes/jointstate_cdr.py); every later message of that shape
+against rclpy's deserialiser (bag/jointstate_cdr.py); every later message of that shape
 is read through numpy views. Other shapes (big-endian, XCDR2, odd serialisers) go through
 rclpy's deserialiser. Columns are put in the requested joint order by name.
 """
@@ -14,8 +14,8 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from ..nodes.jointstate_cdr import NotMine, parse_layout, verify_layout
 from .errors import BagError
+from .jointstate_cdr import NotMine, parse_layout, verify_layout
 from .reader import Bag
 
 

@@ -31,8 +31,8 @@ from ..dynamics import ArmModel
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, segments, zero_phase
-from ..nodes.jointstate_cdr import OutputTemplate
 from .errors import BagError
+from .jointstate_cdr import OutputTemplate
 from .jointstream import JointStream, read_joint_stream
 from .reader import open_bag
 from .recover import copy_layout, custom_data
@@ -124,7 +124,7 @@ def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Pa
                    input_topic: str, output_topic: str, max_gap_s: float,
                    cutoff_hz: float | None) -> dict:
     """What the torque node states on torque_node/config, for an offline run."""
-    from ..nodes.common import package_version
+    from ..version import package_version
     from .model_config import model_config
 
     if estimator == "zero_phase":

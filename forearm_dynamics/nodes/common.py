@@ -6,7 +6,6 @@ import gc
 import signal
 import sys
 from collections.abc import Callable
-from importlib import metadata
 
 import rclpy
 from rclpy.exceptions import NameValidationException
@@ -84,13 +83,6 @@ def spin(node: Node, executor=None, timeout_sec: float = 0.5, done: Future | Non
             executor.remove_node(node)
         except Exception:  # noqa: BLE001, S110 - the context may already be shut down
             pass
-
-
-def package_version() -> str:
-    try:
-        return metadata.version("forearm_dynamics")
-    except metadata.PackageNotFoundError:
-        return "unknown"
 
 
 def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None) -> int:

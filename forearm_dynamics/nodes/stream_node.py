@@ -48,10 +48,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from . import validation as v
-from .common import CONFIG_TOPIC, EXECUTORS, stream_qos
-from .diagnostics import PipelineStats, diagnostic_array
-from .jointstate_cdr import (
+from ..bag.jointstate_cdr import (
     STAMP,
     Layout,
     NotMine,
@@ -60,6 +57,9 @@ from .jointstate_cdr import (
     parse_layout,
     verify_layout,
 )
+from . import validation as v
+from .common import CONFIG_TOPIC, EXECUTORS, stream_qos
+from .diagnostics import PipelineStats, diagnostic_array
 from .params import Params, Spec, init_node
 
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason

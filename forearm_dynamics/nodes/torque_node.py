@@ -50,8 +50,9 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
+from ..version import package_version
 from . import validation as v
-from .common import latched_qos, main_for, package_version
+from .common import latched_qos, main_for
 from .diagnostics import diagnostic_array
 from .model_builder import ModelBuilder
 from .params import ParameterError, Params

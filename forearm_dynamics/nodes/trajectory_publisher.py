@@ -44,11 +44,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ..anthropometry import resolve_body_size
+from ..bag.jointstate_cdr import OutputTemplate
 from ..description import JOINT_NAMES
 from ..exit_codes import OK
 from ..movements import Movement, get_movement, movement_library
 from .common import EXECUTORS, latched_qos, main_for, stream_qos
-from .jointstate_cdr import OutputTemplate
 from .params import ParameterError, Params, Spec, init_node
 
 #: Samples one late tick may catch up (0.5 s at 1 kHz, within the default depth of 1000);
