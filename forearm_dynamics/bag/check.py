@@ -34,61 +34,19 @@ maximum is asked for (latency_p99_ms_max, or check_bag --max-latency-p99-ms).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
-import yaml
 
 from ..analysis.errors import rmse
 from ..analysis.filtering import analysis_config, lowpass
 from ..description import DOF_GROUPS
 from ..movements import get_movement
-from ..paths import config_file
 from ..reference import ReferenceTorques
 from .decode import JointSeries, Marker, Recording
 from .delivery import Delivery, MachineLoad, delivery
 from .model_config import ModelChoice
-
-
-@dataclass(frozen=True)
-class Thresholds:
-    """config/check.yaml: exceeding any of these makes check_bag exit 1.
-
-    latency_p99_ms_target is reported against, never gated on; latency_p99_ms_max (None =
-    off, the default) gates: a slow machine is not wrong data.
-    """
-
-    pipeline_nrmse_max: float = 0.02
-    state_max_abs_rad: float = 1e-6
-    loss_max: int = 0
-    latency_p99_ms_target: float = 1.0
-    latency_p99_ms_max: float | None = None
-    model_group_median_nrmse_max: float = 0.10
-    model_rel_floor: float = 0.05
-    model_min_coverage: float = 0.9
-    tail_grace_s: float = 0.1
-
-    @classmethod
-    def load(cls, path: str | Path | None = None) -> Thresholds:
-        path = Path(path) if path is not None else config_file("check.yaml")
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh) or {}
-        if not isinstance(data, dict):
-            raise ValueError(f"{path}: expected a mapping of thresholds")  # noqa: TRY004 - one-line config error
-        known = {f.name: f.type for f in fields(cls)}
-        unknown = sorted(set(data) - set(known))
-        if unknown:
-            raise ValueError(f"{path}: unknown threshold(s) {unknown}; known: {sorted(known)}")
-        def value(key, v):
-            if v is None and key == "latency_p99_ms_max":
-                return None
-            try:
-                return int(v) if key == "loss_max" else float(v)
-            except (TypeError, ValueError):
-                raise ValueError(f"{path}: {key} must be a number, got {v!r}") from None
-
-        return cls(**{k: value(k, v) for k, v in data.items()})
+from .thresholds import Thresholds
 
 
 @dataclass

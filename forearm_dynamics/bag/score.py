@@ -28,9 +28,10 @@ import numpy as np
 from ..analysis.errors import rmse
 from ..analysis.filtering import analysis_config
 from ..estimation.offline import zero_phase
-from .check import Delivery, Thresholds, delivery
 from .decode import Recording
+from .delivery import Delivery, delivery
 from .model_config import ModelChoice
+from .thresholds import Thresholds
 
 MAX_LAG_S = 0.2
 

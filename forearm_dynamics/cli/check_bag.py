@@ -55,9 +55,10 @@ from pathlib import Path
 import numpy as np
 
 from ..bag import BagError, open_bag, recover
-from ..bag.check import CheckReport, MovementResult, Thresholds, analyse
+from ..bag.check import CheckReport, MovementResult, analyse
 from ..bag.decode import read_config, read_recording
 from ..bag.model_config import model_from_config
+from ..bag.thresholds import Thresholds
 from ..exit_codes import DATA, OK
 from ..movements import get_movement, movement_library
 from ..reference import ReferenceTorques, load_reference, read_reference

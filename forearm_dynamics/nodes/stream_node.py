@@ -2,7 +2,7 @@
 
 One raw subscription, one raw publisher (jointstate_cdr.py): the node works on the CDR
 bytes. An input message's shape (frame_id, names, field counts) is parsed, checked against
-rclpy's deserialiser and validated (names, lengths) once, then cached; a message of a known
+rclpy's deserialiser and validated (names, lengths) once, then cached (input_plans.py); a message of a known
 shape costs one masked comparison, a memcpy and numpy `take`s into the output template,
 whose position, velocity and effort are 8-byte-aligned numpy views, so a sample is
 gathered straight into the outgoing bytes (model joint order). Nothing is allocated per
@@ -48,18 +48,11 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from ..bag.jointstate_cdr import (
-    STAMP,
-    Layout,
-    NotMine,
-    OutputTemplate,
-    aligned_buffer,
-    parse_layout,
-    verify_layout,
-)
+from ..bag.jointstate_cdr import STAMP, OutputTemplate
 from . import validation as v
 from .common import CONFIG_TOPIC, EXECUTORS, stream_qos
 from .diagnostics import PipelineStats, diagnostic_array
+from .input_plans import GENERIC, InputPlan, InputPlans
 from .params import Params, Spec, init_node
 
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
@@ -98,25 +91,6 @@ STREAM_SPECS = (
 )
 
 
-@dataclass(frozen=True)
-class InputPlan:
-    """What the node does with input bytes of one shape (cached per shape).
-
-    layout None: the generic path (rclpy's deserialiser, then `_ingest`). Otherwise `buf`
-    receives a copy of each message and `pos`/`vel` are views on it; `index` maps model
-    joints to message slots, or `rejection` says why every message of this shape is dropped.
-    """
-
-    layout: Layout | None
-    buf: memoryview | None = None  # of an aligned_buffer
-    pos: np.ndarray | None = None
-    vel: np.ndarray | None = None  # None: no velocities in the message
-    index: np.ndarray | None = None
-    rejection: v.Rejection | None = None
-
-
-GENERIC = InputPlan(None)
-PLAN_CACHE = 16  # shapes (like NameMatcher's name lists); oldest dropped first
 TEMPLATE_CACHE = 8  # output templates, one per frame_id
 
 
@@ -167,9 +141,8 @@ class JointStreamNode(Node):
         self.stats = PipelineStats(v.REASONS)
         self._templates: dict[bytes, OutputTemplate] = {}
         self._use_template(self._template(b""))  # self.out, self.q, self.qd, self.effort
-        self._plans: list[InputPlan] = []  # known shapes, newest last
-        self._refused: list[Layout] = []  # shapes the parser got wrong: generic path
-        self._plan: InputPlan = GENERIC
+        self._shapes = InputPlans(self.names)
+        self._plan: InputPlan = GENERIC  # the last message's (the steady state: one shape)
         self._stamp = STAMP.unpack_from
         self._last_t_ns: int | None = None
         self._adaptive_gap = self.settings.max_stamp_gap == 0.0
@@ -189,7 +162,7 @@ class JointStreamNode(Node):
             self.create_timer(s.diagnostics_period, self._publish_diagnostics)
         # First-call costs (shape parsing and checks, numpy paths) now, not on the first
         # sample: the usual shape (model joint order, positions + velocities) is cached.
-        self._plan_for(OutputTemplate(self.joint_names, effort=False).payload())
+        self._plan = self._shapes.find(OutputTemplate(self.joint_names, effort=False).payload())
         self.get_logger().info(
             f"{self.sub.topic_name} -> {self.pub.topic_name} "
             f"(depth {s.qos_depth}, {'reliable' if s.qos_reliable else 'best effort'}, "
@@ -238,7 +211,7 @@ class JointStreamNode(Node):
         try:
             plan = self._plan
             if plan.layout is None or not plan.layout.matches(data):
-                plan = self._plan_for(data)
+                plan = self._plan = self._shapes.find(data)
             if plan.layout is None:
                 t_ns, sec, nsec, reset, velocity_given = self._ingest_generic(data)
             else:
@@ -287,7 +260,7 @@ class JointStreamNode(Node):
         if velocity_given and not np.isfinite(qd).all():
             raise v.Rejection(v.NON_FINITE, self.names.nonfinite_detail("velocity", qd))
 
-    # -- shapes, templates, the generic path (rare: once per new shape) ----------------------
+    # -- templates, the generic path (rare: once per new shape or frame_id) -----------------
     def _template(self, frame_id: bytes) -> OutputTemplate:
         t = self._templates.get(frame_id)
         if t is None:
@@ -301,38 +274,6 @@ class JointStreamNode(Node):
         """Publish from `t` from now on; q, qd, effort are its views (compute() writes them)."""
         self.out, self.q, self.qd, self.effort = t, t.q, t.qd, t.effort
 
-    def _plan_for(self, data: bytes) -> InputPlan:
-        """The plan for this message's shape: a cached one, a new one, or GENERIC."""
-        self._plan = GENERIC
-        for plan in reversed(self._plans):
-            if plan.layout.matches(data):
-                self._plan = plan
-                return plan
-        try:
-            lay = parse_layout(data, max_names=v.MAX_NAMES)
-        except NotMine:
-            return GENERIC  # not little-endian plain CDR, or not a JointState
-        if any(r.matches(data) for r in self._refused):
-            return GENERIC
-        try:
-            verify_layout(lay, data)
-        except Exception:  # noqa: BLE001 - NotMine, or bytes rclpy cannot read either
-            self._refused = [*self._refused[-(PLAN_CACHE - 1):], lay]
-            return GENERIC
-        plan = self._make_plan(lay)
-        self._plans = [*self._plans[-(PLAN_CACHE - 1):], plan]
-        self._plan = plan
-        return plan
-
-    def _make_plan(self, lay: Layout) -> InputPlan:
-        try:
-            index = self._match_fields(list(lay.names), lay.n_pos, lay.n_vel, lay.n_eff)
-        except v.Rejection as r:
-            return InputPlan(lay, rejection=r)
-        buf = aligned_buffer(lay.size)
-        return InputPlan(lay, buf=memoryview(buf), pos=lay.array(buf, "position"),
-                         vel=lay.array(buf, "velocity") if lay.n_vel else None, index=index)
-
     def _ingest_generic(self, data: bytes) -> tuple[int, int, int, bool, bool]:
         """Any JointState bytes rclpy can read: deserialise, then `_ingest`."""
         try:
@@ -345,24 +286,12 @@ class JointStreamNode(Node):
         t_ns, reset, velocity_given = self._ingest(msg)
         return t_ns, msg.header.stamp.sec, msg.header.stamp.nanosec, reset, velocity_given
 
-    def _match_fields(self, names, n_pos: int, n_vel: int, n_eff: int) -> np.ndarray:
-        """Index of the model joints in `names`; raise Rejection for bad names or lengths."""
-        index = self.names.match(names)
-        n = len(names)
-        if n_pos != n:
-            raise v.Rejection(v.LENGTH_MISMATCH, f"{n_pos} positions for {n} names")
-        if n_vel not in (0, n):
-            raise v.Rejection(v.LENGTH_MISMATCH, f"{n_vel} velocities for {n} names (0 or {n})")
-        if n_eff not in (0, n):  # unused, but a malformed message is not trusted
-            raise v.Rejection(v.LENGTH_MISMATCH, f"{n_eff} efforts for {n} names (0 or {n})")
-        return index
-
     def _ingest(self, msg: JointState) -> tuple[int, bool, bool]:
         """Validate and gather q (and qd if given) in model order; raise Rejection."""
         names = msg.name
         pos, vel = msg.position, msg.velocity
         nvel = len(vel)
-        index = self._match_fields(names, len(pos), nvel, len(msg.effort))
+        index = v.match_fields(self.names, names, len(pos), nvel, len(msg.effort))
         np.frombuffer(pos, dtype=np.float64).take(index, out=self.q)
         if nvel:
             np.frombuffer(vel, dtype=np.float64).take(index, out=self.qd)

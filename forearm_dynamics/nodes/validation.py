@@ -164,3 +164,16 @@ def flush_suppressed(warned: dict[str, tuple[float, int]], logger, every_s: floa
             logger.warning(f"rejected sample [{reason}]: {suppressed} more in the last "
                            f"{now - last:.1f} s (counts in /diagnostics)")
             warned[reason] = (now, 0)
+
+
+def match_fields(names: NameMatcher, msg_names, n_pos: int, n_vel: int, n_eff: int) -> np.ndarray:
+    """Index of the model joints in `msg_names`; raise Rejection for bad names or lengths."""
+    index = names.match(msg_names)
+    n = len(msg_names)
+    if n_pos != n:
+        raise Rejection(LENGTH_MISMATCH, f"{n_pos} positions for {n} names")
+    if n_vel not in (0, n):
+        raise Rejection(LENGTH_MISMATCH, f"{n_vel} velocities for {n} names (0 or {n})")
+    if n_eff not in (0, n):  # unused, but a malformed message is not trusted
+        raise Rejection(LENGTH_MISMATCH, f"{n_eff} efforts for {n} names (0 or {n})")
+    return index
