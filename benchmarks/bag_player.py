@@ -17,8 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -26,43 +24,37 @@ from pathlib import Path
 
 import numpy as np
 
+from forearm_dynamics.processes import BIN, Child, claim_domain, ros_env
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "test"))
-BIN = Path(sys.executable).parent
-
-
-def env(domain: int) -> dict[str, str]:
-    e = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "RMW_"))}
-    e.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1",
-             HOME=os.environ.get("HOME", "/tmp"))  # noqa: S108 - ROS needs a HOME; /tmp if none
-    return e
 
 
 def one_run(src: Path, logs: np.ndarray, work: Path, busy_us: int, domain: int) -> dict:
     from forearm_dynamics.bag import open_bag
 
     out = work / f"played_{busy_us}.mcap"
-    e = env(domain)
-    with open(work / f"rec_{busy_us}.log", "wb") as fo:
-        rec = subprocess.Popen([str(BIN / "bag_recorder"), "--ros-args", "-p", f"output:={out}",
-                                "-p", "topics:=[joint_states]"], env=e, stdout=fo, stderr=subprocess.STDOUT)
+    e = ros_env(domain, work)
+    rec = Child.script("bag_recorder", ["-p", f"output:={out}", "-p", "topics:=[joint_states]"], e,
+                       work, label=f"rec_{busy_us}")
     try:
-        player = subprocess.run([str(BIN / "bag_player"), str(src), "--ros-args", "-p", "start_delay:=2.0",
-                                 "-p", "subscriber_timeout:=30.0", "-p", f"busy_wait_us:={busy_us}"],
-                                env=e, capture_output=True, text=True, timeout=600, check=False)
+        player = Child(f"player_{busy_us}", [str(BIN / "bag_player"), str(src), "--ros-args",
+                                             "-p", "start_delay:=2.0", "-p", "subscriber_timeout:=30.0",
+                                             "-p", f"busy_wait_us:={busy_us}"], e, work)
+        if player.wait(timeout=600) is None:
+            player.stop()
     finally:
-        rec.send_signal(signal.SIGINT)
-        rec.wait(timeout=30)
+        rec.stop(timeout=30)
     got = np.array([m.log_time for _c, m in open_bag(out).messages()], np.int64)
     n = min(len(got), len(logs))
     err = (np.diff(got[:n]) - np.diff(logs[:n])) / 1e6
     a = np.abs(err)
-    summary = [ln for ln in player.stderr.splitlines() if "done:" in ln]
+    summary = [ln for ln in player.text().splitlines() if "done:" in ln]
     return {"busy_wait_us": busy_us, "sent": len(logs), "received": len(got),
             "lost": int(len(logs) - len(got)),
             "interval_error_ms": {"p50": float(np.median(a)), "p99": float(np.percentile(a, 99)),
                                   "p99.9": float(np.percentile(a, 99.9)), "max": float(a.max())},
-            "player_summary": summary[-1] if summary else player.stderr[-300:]}
+            "player_summary": summary[-1] if summary else player.text()[-300:]}
 
 
 def main() -> int:
@@ -78,7 +70,8 @@ def main() -> int:
     logs = write_stream_bag(src, n, jitter_ns=100_000)["logs"]
     load_before = os.getloadavg()
     t0 = time.time()
-    runs = [one_run(src, logs, work, 0, 81), one_run(src, logs, work, 300, 82)]
+    lease = claim_domain(81, "bag_player benchmark")  # held until this process exits
+    runs = [one_run(src, logs, work, 0, lease.domain), one_run(src, logs, work, 300, lease.domain)]
     result = {
         "command": f"python benchmarks/bag_player.py --seconds {args.seconds:g}",
         "when": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(t0)),

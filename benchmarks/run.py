@@ -71,7 +71,7 @@ from pathlib import Path
 from forearm_dynamics.exit_codes import OK
 from forearm_dynamics.movements import movement_library
 from forearm_dynamics.paths import config_file
-from forearm_dynamics.processes import ros_env
+from forearm_dynamics.processes import claim_domain, ros_env
 
 from . import compute, offline, recorder
 from .stats import loadavg, machine_info, merge_results, write_json
@@ -313,8 +313,11 @@ def main(argv: list[str] | None = None) -> int:
     unknown = set(sections) - set(SECTIONS)
     if unknown:
         ap.error(f"unknown sections {sorted(unknown)}; choose from {SECTIONS}")
-    if not 0 < args.domain < 233:
-        ap.error("--domain must be 1..232 (0 is everyone's default)")
+    try:
+        lease = claim_domain(args.domain, "benchmarks")  # held until this process exits
+    except ValueError as exc:
+        ap.error(str(exc))
+    args.domain = lease.domain
     t_start = time.perf_counter()
     res: dict = {
         "schema": 1, "mode": "quick" if args.quick else "full",

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from forearm_dynamics.exit_codes import DATA, OK
-from forearm_dynamics.processes import Child, Sampler, ros_env
+from forearm_dynamics.processes import Child, Sampler, claim_domain, ros_env
 
 from .stats import loadavg, machine_info, percentiles
 
@@ -215,8 +215,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--p99-tolerance", type=float, default=0.25)
     ap.add_argument("--p99-floor-ms", type=float, default=0.1)
     args = ap.parse_args(argv)
-    if not 0 < args.domain < 233:
-        ap.error(f"--domain must be 1..232 (0 is everyone's default), got {args.domain}")
+    try:
+        args.lease = claim_domain(args.domain, "soak")  # held until this process exits
+    except ValueError as exc:
+        ap.error(str(exc))
+    args.domain = args.lease.domain
     if args.minutes <= 0:
         ap.error("--minutes must be > 0")
     return args

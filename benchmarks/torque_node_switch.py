@@ -22,14 +22,17 @@ import time
 
 import numpy as np
 
+from forearm_dynamics.processes import claim_domain
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--samples", type=int, default=20000)
     ap.add_argument("--switch-every", type=int, default=2000)
     args = ap.parse_args()
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
+    lease = claim_domain(int(os.environ.get("ROS_DOMAIN_ID") or 83), "torque_node_switch")
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # nothing leaves this machine
+    os.environ["ROS_DOMAIN_ID"] = str(lease.domain)
 
     import rclpy
     from rclpy.parameter import Parameter

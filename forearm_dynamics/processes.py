@@ -11,7 +11,8 @@ tests (test/rosproc.py) start every node through `Child`.
 - `Sampler`: CPU time and memory of some PIDs from /proc, the machine's busy time and load
   average, in a thread; what the benchmarks report next to their figures.
 - `lease_domain`: a ROS domain id no other process on this machine holds through it (an
-  flock per id), so two test sessions run at once never share a domain by chance.
+  flock per id), so two test sessions run at once never share a domain by chance;
+  `claim_domain`: the demo's and benchmarks' domain, moved when another run holds it.
 """
 
 from __future__ import annotations
@@ -94,6 +95,24 @@ def lease_domain(lo: int, hi: int, start: int | None = None, lock_dir: Path | No
             continue
         return DomainLease(domain, fd)
     return DomainLease(ids[first])
+
+
+def claim_domain(wanted: int, prog: str, lock_dir: Path | None = None) -> DomainLease:
+    """`wanted`, or the next id of its range that no other run on this machine holds (a
+    second `make demo`, a test session), said in one line on stderr. Ranges: 1..101 and
+    215..232 (DDS ports outside Linux's ephemeral range) and 102..214 (the tests' own).
+    Hold the lease for the run."""
+    if not 0 < wanted < 233:
+        raise ValueError(f"ROS domain must be 1..232 (0 is everyone's default), got {wanted}")
+    lo, hi = next(r for r in ((1, 101), (102, 214), (215, 232)) if r[0] <= wanted <= r[1])
+    lease = lease_domain(lo, hi, wanted - lo, lock_dir)
+    if lease.domain != wanted:
+        print(f"{prog}: ROS domain {wanted} is in use by another forearm_dynamics run on this "
+              f"machine; using {lease.domain}", file=sys.stderr, flush=True)
+    elif not lease.exclusive:
+        print(f"{prog}: every ROS domain of {lo}..{hi} is in use; sharing {wanted}",
+              file=sys.stderr, flush=True)
+    return lease
 
 
 def _new_file(directory: Path, stem: str, suffix: str) -> Path:

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from forearm_dynamics.processes import Child, Sampler, lease_domain, proc_stat, ros_env
+from forearm_dynamics.processes import Child, Sampler, claim_domain, lease_domain, proc_stat, ros_env
 
 #: Prints "ready", then sleeps; with "stubborn" it ignores SIGINT.
 SLEEPER = (
@@ -73,6 +73,26 @@ def test_lease_domain_is_exclusive_across_processes_until_released(tmp_path) -> 
     after = lease_domain(225, 226, held - 225, locks)
     assert after.exclusive and after.domain == held
     after.release()
+
+
+def test_claim_domain_moves_off_a_held_domain_and_says_so(tmp_path, capsys) -> None:
+    """The demo's and benchmarks' domain: the one asked for when free; when another run
+    holds it, the next free one of its range, in one line; 0 and 233+ refused."""
+    locks = tmp_path / "locks"
+    free = claim_domain(73, "demo", locks)
+    assert free.domain == 73 and free.exclusive and capsys.readouterr().err == ""
+    moved = claim_domain(73, "demo", locks)  # 73 is held (by `free`)
+    assert moved.exclusive and moved.domain == 74
+    assert capsys.readouterr().err == ("demo: ROS domain 73 is in use by another forearm_dynamics "
+                                       "run on this machine; using 74\n")
+    edge = claim_domain(232, "bench", locks)
+    again = claim_domain(232, "bench", locks)  # wraps within 215..232, never into 233+
+    assert edge.domain == 232 and again.domain == 215
+    for lease in (free, moved, edge, again):
+        lease.release()
+    for bad in (0, 233, -1):
+        with pytest.raises(ValueError, match="1..232"):
+            claim_domain(bad, "demo", locks)
 
 
 def test_test_domains_stay_leased_until_released() -> None:

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from ..exit_codes import DATA, OK
-from ..processes import BIN, Child, ros_env
+from ..processes import BIN, Child, claim_domain, ros_env
 from .common import die
 
 
@@ -46,6 +46,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--movements", default="", help="comma-separated ids (default: all 65)")
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "73") or 73))
     args = ap.parse_args(argv)
+    try:
+        lease = claim_domain(args.domain, "demo")  # held until this process exits
+    except ValueError as exc:
+        return die(f"demo: {exc}")
+    args.domain = lease.domain
     stamp = time.strftime("%Y%m%d_%H%M%S")
     out = args.out / stamp
     try:
