@@ -104,6 +104,11 @@ def transition(dt: float) -> np.ndarray:
     return np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
 
 
+def observation(velocity_given: bool) -> np.ndarray:
+    """H: the position is measured, and the velocity when the message carries it."""
+    return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) if velocity_given else np.array([[1.0, 0.0, 0.0]])
+
+
 def process_noise(dt: float, psd: float) -> np.ndarray:
     d2, d3 = dt * dt, dt * dt * dt
     return psd * np.array([[d2 * d3 / 20, d2 * d2 / 8, d3 / 6],
@@ -118,7 +123,7 @@ def steady_state(dt: float, r: float, r_v: float | None, psd: float) -> tuple[np
     """
     f = transition(dt)
     q = process_noise(dt, psd / (r * r))
-    h = np.array([[1.0, 0.0, 0.0]]) if r_v is None else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    h = observation(r_v is not None)
     rm = np.eye(1) if r_v is None else np.diag([1.0, (r_v / r) ** 2])
     p = solve_discrete_are(f.T, h.T, q, rm)
     k = p @ h.T @ np.linalg.inv(h @ p @ h.T + rm)
@@ -379,8 +384,7 @@ class KalmanCA(StateEstimator):
         else:  # the gain the filter uses at this dt now (no Riccati solve on a node's thread)
             g, _ = measurement_update(self._prior(dt), self._r * self._r, rv2)
             k = np.array(g).reshape(3, 1 if rv2 is None else 2)
-        h = (np.array([[1.0, 0.0, 0.0]]) if not velocity_given
-             else np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+        h = observation(velocity_given)
         f = transition(dt)
         g = np.array([dt**3 / 6, dt**2 / 2, dt])  # true-state increment per unit jerk, on top of F x
         ikh = np.eye(3) - k @ h
