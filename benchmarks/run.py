@@ -202,7 +202,7 @@ def goals(res: dict) -> dict:
                                        lambda x: x <= 1.3),
         "cpu_percent_lt_50": ("< 50 %", at(*t, "node_process", "cpu_percent"), lambda x: x < 50),
     }
-    return {k: {"target": tgt, "value": v, "met": (ok(v) if v is not None else None)}
+    return {k: {"target": tgt, "value": v, "met": (bool(ok(v)) if v is not None else None)}
             for k, (tgt, v, ok) in g.items()}
 
 
