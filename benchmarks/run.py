@@ -71,10 +71,10 @@ from pathlib import Path
 from forearm_dynamics.exit_codes import OK
 from forearm_dynamics.movements import movement_library
 from forearm_dynamics.paths import config_file
-from forearm_dynamics.processes import claim_domain, ros_env
+from forearm_dynamics.processes import ros_env
 
 from . import compute, offline, recorder
-from .stats import loadavg, machine_info, merge_results, write_json
+from .stats import claim_domain_arg, loadavg, machine_info, merge_results, write_json
 from .torque_path import Variant, run_variant
 
 SECTIONS = ("compute", "torque", "choices", "recorder", "offline")
@@ -313,10 +313,7 @@ def main(argv: list[str] | None = None) -> int:
     unknown = set(sections) - set(SECTIONS)
     if unknown:
         ap.error(f"unknown sections {sorted(unknown)}; choose from {SECTIONS}")
-    try:
-        lease = claim_domain(args.domain, "benchmarks")  # held until this process exits
-    except ValueError as exc:
-        ap.error(str(exc))
+    lease = claim_domain_arg(ap, args.domain, "benchmarks")  # held until this process exits
     args.domain = lease.domain
     t_start = time.perf_counter()
     res: dict = {

@@ -42,9 +42,9 @@ from pathlib import Path
 import numpy as np
 
 from forearm_dynamics.exit_codes import DATA, OK
-from forearm_dynamics.processes import Child, Sampler, claim_domain, ros_env
+from forearm_dynamics.processes import Child, Sampler, ros_env
 
-from .stats import loadavg, machine_info, percentiles
+from .stats import claim_domain_arg, loadavg, machine_info, percentiles
 
 PROCESSES = ("torque_node", "bag_recorder", "trajectory_publisher")
 TAIL_GRACE_NS = 500_000_000
@@ -215,10 +215,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--p99-tolerance", type=float, default=0.25)
     ap.add_argument("--p99-floor-ms", type=float, default=0.1)
     args = ap.parse_args(argv)
-    try:
-        args.lease = claim_domain(args.domain, "soak")  # held until this process exits
-    except ValueError as exc:
-        ap.error(str(exc))
+    args.lease = claim_domain_arg(ap, args.domain, "soak")  # held until this process exits
     args.domain = args.lease.domain
     if args.minutes <= 0:
         ap.error("--minutes must be > 0")

@@ -8,12 +8,24 @@ each writes only its own top-level keys and keeps the others (read-modify-write)
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
 from pathlib import Path
 
 import numpy as np
+
+from forearm_dynamics.processes import DomainLease, claim_domain
+
+
+def claim_domain_arg(ap: argparse.ArgumentParser, domain: int, prog: str) -> DomainLease:
+    """The benchmark's --domain, held for the run (processes.claim_domain: moved, and said
+    so, when another run holds it); an id outside 1..232 is a usage error."""
+    try:
+        return claim_domain(domain, prog)
+    except ValueError as exc:
+        ap.error(str(exc))
 
 
 def percentiles(values, scale: float = 1.0) -> dict[str, float]:

@@ -57,9 +57,9 @@ import numpy as np
 if __package__ in (None, ""):  # `python benchmarks/torque_node_rate.py` from the repo root
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from benchmarks.stats import loadavg, machine_info, merge_results, percentiles, write_json
+from benchmarks.stats import claim_domain_arg, loadavg, machine_info, merge_results, percentiles, write_json
 from forearm_dynamics.exit_codes import DATA, OK
-from forearm_dynamics.processes import Child, claim_domain, proc_stat, ros_env
+from forearm_dynamics.processes import Child, proc_stat, ros_env
 
 MS = 1_000_000
 RATE_HZ = 1000.0
@@ -335,10 +335,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--domain", type=int, default=env_domain or 79)
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results.json"))
     args = ap.parse_args(argv)
-    try:
-        lease = claim_domain(args.domain, "torque_node_rate")  # held until this process exits
-    except ValueError as exc:
-        ap.error(str(exc))
+    lease = claim_domain_arg(ap, args.domain, "torque_node_rate")  # held until this process exits
     args.domain = lease.domain
     parts = set(args.parts.split(","))
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
