@@ -49,6 +49,10 @@ setup(
         "ros-jazzy-builtin-interfaces",
         "ros-jazzy-rcl-interfaces",
         "ros-jazzy-rosgraph-msgs",
+        "ros-jazzy-visualization-msgs",  # arm_viz, bag_viz: MarkerArray
+        # check_bag --html: its offline JavaScript bundle makes the report one file that opens
+        # without a network; pure Python (+ narwhals, packaging), so required, not an extra
+        "plotly>=6",
     ],
     extras_require={
         "plots": ["matplotlib>=3.7"],

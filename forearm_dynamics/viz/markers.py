@@ -1,0 +1,90 @@
+"""The arm's markers as plain arrays: what a visualization_msgs/MarkerArray holds, without ROS.
+
+`arm_markers(scene, colours, q, tau)` gives one marker per massive link (ns = the link's
+name, id 0) and, optionally, one torque arrow per joint (ns = "torque/<joint>", id 0): from
+the joint centre along its axis, length |torque| x arrow_scale, pointing along +axis for a
+positive torque (right-hand rule: the sense the torque turns the child). The arrays are
+turned into messages by nodes/arm_markers.py (rclpy classes) or viz/marker_cdr.py (CDR
+bytes, for bag_viz); keeping the numbers here lets them be tested without ROS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .colors import TorqueColours
+from .scene import ArmScene
+
+#: visualization_msgs/Marker type constants (the same numbers as the message's).
+ARROW, CUBE, SPHERE, CYLINDER = 0, 1, 2, 3
+KINDS = {"box": CUBE, "sphere": SPHERE, "cylinder": CYLINDER}
+ARROW_NS = "torque/"
+#: Arrow shaft and head diameter, head length (m).
+ARROW_SCALE = (0.004, 0.008, 0.008)
+#: Shortest arrow drawn (m): a zero-length arrow is invalid in RViz.
+MIN_ARROW = 1e-3
+
+
+@dataclass(frozen=True)
+class MarkerFrame:
+    """The markers of one instant. Shapes: n solids; arrows (if any): one per joint."""
+
+    ns: tuple[str, ...]  # n
+    types: np.ndarray  # (n,) Marker type
+    positions: np.ndarray  # (n, 3) m, root frame
+    orientations: np.ndarray  # (n, 4) x, y, z, w
+    scales: np.ndarray  # (n, 3) Marker.scale (m)
+    rgba: np.ndarray  # (n, 4)
+    arrow_ns: tuple[str, ...] = ()
+    arrows: np.ndarray | None = None  # (m, 2, 3): start, end (root frame)
+    arrow_rgba: np.ndarray | None = None  # (m, 4)
+
+
+def _scale(kind: str, size: tuple[float, ...]) -> np.ndarray:
+    if kind == "cylinder":
+        return np.array([2.0 * size[0], 2.0 * size[0], size[1]])
+    if kind == "sphere":
+        return np.full(3, 2.0 * size[0])
+    return np.array(size, float)
+
+
+class MarkerMaker:
+    """The constant part of one model's markers (names, types, sizes, root colour), made once
+    per model; `frame(q, tau)` adds what moves."""
+
+    def __init__(self, scene: ArmScene, colours: TorqueColours, *, arrows: bool = False,
+                 arrow_scale: float = 0.05, alpha: float = 1.0):
+        self.scene, self.colours = scene, colours
+        self.arrows, self.arrow_scale, self.alpha = arrows, float(arrow_scale), float(alpha)
+        shapes = scene.shapes
+        self.ns = tuple(s.link for s in shapes)
+        self.types = np.array([KINDS[s.geometry.kind] for s in shapes], np.int32)
+        self.scales = np.array([_scale(s.geometry.kind, s.geometry.size) for s in shapes])
+        self._joint = np.array([-1 if s.joint_index is None else s.joint_index for s in shapes])
+        self._fixed_rgb = np.array([s.rgba[:3] for s in shapes], float)
+        self.arrow_ns = tuple(ARROW_NS + n for n in scene.joint_names) if arrows else ()
+        self._n = len(scene.joint_names)
+
+    def frame(self, q, tau) -> MarkerFrame:
+        """The markers at posture q (rad) with torques tau (N·m), both in joint_names order."""
+        tau = np.asarray(tau, float).reshape(-1)
+        if tau.shape != (self._n,) or not np.isfinite(tau).all():
+            raise ValueError(f"torques must be {self._n} finite numbers in joint_names order, "
+                             f"got shape {tau.shape}")
+        pos, rot = self.scene.poses(q)
+        quat = Rotation.from_matrix(rot).as_quat()  # x, y, z, w
+        quat[quat[:, 3] < 0] *= -1.0
+        joint_rgb = self.colours.rgb(tau)
+        rgb = np.where((self._joint < 0)[:, None], self._fixed_rgb, joint_rgb[self._joint])
+        rgba = np.column_stack([rgb, np.full(len(rgb), self.alpha)])
+        if not self.arrows:
+            return MarkerFrame(self.ns, self.types, pos, quat, self.scales, rgba)
+        origins, axes = self.scene.joint_axes()  # at q: poses() ran FK
+        length = np.maximum(np.abs(tau) * self.arrow_scale, MIN_ARROW) * np.where(tau < 0, -1.0, 1.0)
+        ends = origins + length[:, None] * axes
+        return MarkerFrame(self.ns, self.types, pos, quat, self.scales, rgba, self.arrow_ns,
+                           np.stack([origins, ends], axis=1),
+                           np.column_stack([joint_rgb, np.ones(self._n)]))
