@@ -1,0 +1,157 @@
+"""Calibration of the torque σ (issue 19): is the band as wide as the error, per DOF group?
+
+    .venv/bin/python benchmarks/uncertainty.py             (all 65 movements, ~3-6 min loaded)
+    .venv/bin/python benchmarks/uncertainty.py --every 4   (a quarter: tuning runs)
+
+No ROS: the offline API (uncertainty.inverse_dynamics_with_std), i.e. the same estimator
+update() calls and TorqueStd as torque_node, one per sample. Streams: the estimation
+benchmark's (benchmarks/estimation.py Truth: each movement after 0.5 s of held start posture,
+estimator reset per movement, Gaussian noise on every joint), for the sensor zoo below
+and the exact input of trajectory_publisher (1 kHz, exact velocities). The σ is scored
+against the SAME model's torques at the exact analytic state (the model part is left out:
+that truth has no model error; check_bag scores it the same way), over the movements'
+samples (the held lead is not scored):
+  - coverage: the fraction of samples with |τ - τ_true| <= 1.96 σ, per DOF group (all its
+    DOFs' samples together);
+  - ratio: RMS(σ) / RMSE per group.
+Targets: coverage 0.90-0.98 and ratio 0.8-1.5 for every group of every zoo row. Also the
+uncalibrated variants, which must miss them: the raw filter posterior P without the lag
+part ("posterior"), and the noise covariance without the lag part ("no_lag").
+
+Writes benchmarks/uncertainty.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+from benchmarks.estimation import GROUP_IDX, Truth, machine  # noqa: E402
+from benchmarks.stats import write_json  # noqa: E402
+from forearm_dynamics.dynamics import build_model  # noqa: E402
+from forearm_dynamics.uncertainty import inverse_dynamics_with_std  # noqa: E402
+
+SEED = 20261201
+#: (label, rate Hz, position noise deg, velocity noise deg/s or None = positions only).
+#: Until the sensors helper's zoo (benchmarks/sensors.py) lands: the estimation benchmark's
+#: Gaussian noise model at the rates its rows use.
+ZOO = (
+    ("mocap_100hz", 100.0, 0.5, None),
+    ("glove_30hz", 30.0, 2.0, None),
+    ("imu_250hz", 250.0, 0.1, None),
+    ("encoder_1khz", 1000.0, 0.1, 2.0),
+    ("exact_1khz", 1000.0, 0.0, 0.0),
+)
+COVERAGE = (0.90, 0.98)
+RATIO = (0.8, 1.5)
+VARIANTS = {"calibrated": {}, "no_lag": {"lag": False},
+            "posterior": {"lag": False, "covariance": "posterior"}}
+
+
+def stream(arm, truth: Truth, noise_deg: float, vel_dps: float | None, seed: int, every: int,
+           **kw) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(error, σ, σ_est², σ_lag²) over the scored samples of every `every`-th movement."""
+    rng = np.random.default_rng(seed)
+    errs, stds, ve, vl = [], [], [], []
+    for k, (_mv, stamps, _t, q, qd, qdd, i0) in enumerate(truth.items):
+        zq = q + rng.normal(0.0, math.radians(noise_deg), q.shape) if noise_deg else q
+        zv = None
+        if vel_dps is not None:
+            zv = qd + rng.normal(0.0, math.radians(vel_dps), qd.shape) if vel_dps else qd
+        if k % every:
+            continue
+        out = inverse_dynamics_with_std(arm, stamps, zq, zv, model=False, t_in_ns=True, **kw)
+        tau = truth.tau[k]
+        errs.append(out.tau[i0:] - tau)
+        stds.append(out.std[i0:])
+        ve.append(out.var_est[i0:])
+        vl.append(out.var_lag[i0:])
+    return tuple(np.concatenate(x) for x in (errs, stds, ve, vl))
+
+
+def score(err: np.ndarray, std: np.ndarray, ve: np.ndarray, vl: np.ndarray) -> dict:
+    """Per group: coverage, ratio, and the parts' RMS as ratios to the RMSE (est, lag)."""
+    out = {}
+    for g, idx in GROUP_IDX.items():
+        e, s = err[:, idx], std[:, idx]
+        ok = np.isfinite(s)
+        e, s, a, b = e[ok], s[ok], ve[:, idx][ok], vl[:, idx][ok]
+        rmse = float(np.sqrt(np.mean(e**2)))
+        out[g] = {"coverage": float(np.mean(np.abs(e) <= 1.96 * s)),
+                  "ratio": float(np.sqrt(np.mean(s**2)) / rmse) if rmse > 0 else math.inf,
+                  "rmse_nm": rmse, "rms_std_nm": float(np.sqrt(np.mean(s**2))),
+                  "est_ratio": float(np.sqrt(np.mean(a)) / rmse) if rmse > 0 else math.inf,
+                  "lag_ratio": float(np.sqrt(np.mean(b)) / rmse) if rmse > 0 else math.inf}
+    return out
+
+
+def met(groups: dict) -> bool:
+    return all(COVERAGE[0] <= v["coverage"] <= COVERAGE[1] and RATIO[0] <= v["ratio"] <= RATIO[1]
+               for v in groups.values())
+
+
+def line(label: str, variant: str, groups: dict) -> str:
+    cells = " ".join(f"{g} {v['coverage']:.3f}/{v['ratio']:.2f}({v['est_ratio']:.2f},{v['lag_ratio']:.2f})"
+                     for g, v in groups.items())
+    return f"{label:13s} {variant:10s} {cells}  {'met' if met(groups) else 'MISSED'}"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--every", type=int, default=1, help="score every N-th movement (tuning: 4)")
+    ap.add_argument("--gain", type=float, default=None, help="lag gain (default: lag.LAG_GAIN)")
+    ap.add_argument("--tau", type=float, default=None,
+                    help="jerk RMS time constant s (default: lag.JERK_TAU_S)")
+    ap.add_argument("--rows", default="", help="comma-separated zoo labels (default: all)")
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--out", default=str(HERE / "uncertainty.json"))
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args(argv)
+    wall = time.perf_counter()
+    info = machine()
+    arm = build_model("segmented")
+    want = set(filter(None, args.rows.split(",")))
+    rows = []
+    truths: dict[float, Truth] = {}
+    for i, (label, rate, noise, vel) in enumerate(ZOO):
+        if want and label not in want:
+            continue
+        truth = truths.get(rate) or truths.setdefault(rate, Truth(arm, rate))
+        for variant in args.variants.split(","):
+            kw = dict(VARIANTS[variant])
+            if variant == "calibrated":
+                kw.update({k: v for k, v in (("gain", args.gain), ("tau_s", args.tau)) if v is not None})
+            err, std, ve, vl = stream(arm, truth, noise, vel, SEED + i, args.every, **kw)
+            groups = score(err, std, ve, vl)
+            rows.append({"row": label, "rate_hz": rate, "noise_deg": noise, "velocity_noise_dps": vel,
+                         "variant": variant, "groups": groups, "met": met(groups),
+                         "samples": len(err)})
+            print(line(label, variant, groups), flush=True)
+    info["loadavg_end"] = list(os.getloadavg())
+    cal = [r for r in rows if r["variant"] == "calibrated"]
+    command = "python benchmarks/uncertainty.py" + (f" --every {args.every}" if args.every > 1 else "")
+    section = {"command": command,
+               "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": info,
+               "targets": {"coverage": COVERAGE, "ratio": RATIO,
+                           "met": bool(cal) and all(r["met"] for r in cal)},
+               "zoo": [dict(zip(("label", "rate_hz", "noise_deg", "velocity_noise_dps"), z, strict=True))
+                       for z in ZOO],
+               "rows": rows, "wall_time_s": time.perf_counter() - wall}
+    print(f"targets met: {section['targets']['met']}; load {info['loadavg_start']} -> "
+          f"{info['loadavg_end']}; {section['wall_time_s']:.0f} s")
+    if not args.no_write:
+        write_json(Path(args.out), section)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
