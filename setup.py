@@ -14,6 +14,7 @@ EXECUTABLES = {
     "check_bag": "forearm_dynamics.cli.check_bag:main",
     "demo": "forearm_dynamics.cli.demo:main",
     "torque_node": "forearm_dynamics.nodes.torque_node:main",
+    "arm_sim": "forearm_dynamics.nodes.arm_sim:main",
     "trajectory_publisher": "forearm_dynamics.nodes.trajectory_publisher:main",
     "bag_recorder": "forearm_dynamics.nodes.bag_recorder:main",
     "null_echo_node": "forearm_dynamics.nodes.null_echo_node:main",
