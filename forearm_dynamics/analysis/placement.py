@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 from scipy.optimize import minimize
 
 from ..anthropometry import resolve_body_size
@@ -173,22 +174,24 @@ def start_of(v: Variant, overrides: dict) -> tuple:
     return tuple(out)
 
 
-def _model_yaml_without_placements() -> str:
-    """model.yaml minus its `simplified:` block: the fits write that block, not read it."""
-    text = config_file("model.yaml").read_text(encoding="utf-8")
-    a = text.find("\nsimplified:")
-    b = text.find("\n# ----", a + 1)
-    return text if a < 0 else text[:a] + text[b:]
+def _config_content(name: str, drop: tuple[str, ...] = ()) -> str:
+    """A config file's content (parsed, canonical JSON): comments and layout do not count,
+    so correcting a citation does not invalidate the fits."""
+    data = yaml.safe_load(config_file(name).read_text(encoding="utf-8"))
+    for key in drop:
+        data.pop(key, None)
+    return json.dumps(data, sort_keys=True)
 
 
 def inputs_digest() -> str:
-    """Hash of everything a fit depends on besides its own spec."""
+    """Hash of everything a fit depends on besides its own spec. model.yaml counts without
+    its `simplified:` block: the fits write that block, not read it."""
     h = hashlib.sha256()
     h.update(f"fit-version {FIT_VERSION} {OBJECTIVE} {sorted(NM_OPTIONS.items())}".encode())
     h.update(REFERENCE_FILE.read_bytes())
     for name in ("movements.yaml", "analysis.yaml", "body_sizes.yaml"):
-        h.update(config_file(name).read_bytes())
-    h.update(_model_yaml_without_placements().encode())
+        h.update(_config_content(name).encode())
+    h.update(_config_content("model.yaml", drop=("simplified",)).encode())
     return h.hexdigest()
 
 

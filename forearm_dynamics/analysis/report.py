@@ -11,7 +11,9 @@ import numpy as np
 from ..description import DOF_GROUPS, JOINT_NAMES
 from ..movements import movement_library
 from .errors import ErrorSet, summarize
+from .formatting import mm, nm, pc
 from .placement import HEADLINE
+from .review_report import REVIEW_TABLES, claims_table
 
 _IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
 METRICS = ("nrmse", "nrmse_all", "nrmse_global", "rmse")
@@ -61,22 +63,6 @@ def write_json(path: Path, results: dict) -> None:
     tmp.replace(path)
 
 
-def pc(x) -> str:
-    """A fraction as a percentage, 3 significant digits (the README's and tables' unit)."""
-    if x is None or not math.isfinite(x):
-        return "–"
-    v = 100 * x
-    return f"{v:.3g}" if abs(v) < 1000 else f"{v:.0f}"
-
-
-def nm(x) -> str:
-    return "–" if x is None else f"{x:.3g}"
-
-
-def mm(v) -> str:
-    return f"{1000 * v[0]:.1f}, {1000 * v[1]:.1f}"
-
-
 def _s(results, name, size="p50", group="pro_sup", metric="nrmse"):
     return results["models"][name][size]["summary"][group][metric]
 
@@ -121,62 +107,6 @@ def placements_table(r: dict) -> str:
                      f"{mm(p['axis_offset_proximal'])} | {mm(p['axis_offset_distal'])} | "
                      f"{v['axis_angle_to_cylinder_deg']:.2f}° | {v['axis_angle_to_mobl_deg']:.2f}° | "
                      f"{v['fitted_parameters']} |")
-    return "\n".join(lines)
-
-
-def claims_table(r: dict) -> str:
-    m = lambda n, **k: _s(r, n, **k)
-    el = r["elbow"]
-    ob, pa, pl, so = "oblique", "paper", "parallel", "solid"
-    sizes = [pc(_s(r, ob, size=s)["median"]) for s in ("p5", "p50", "p95")]
-    rows = [
-        ("The segmented model beats the solid one at pro/sup",
-         (f"Not with the paper's placement: `paper` {pc(m(pa)['mean'])} % mean / "
-          f"{pc(m(pa)['median'])} % median "
-          f"vs solid {pc(m(so)['mean'])} / {pc(m(so)['median'])} %. "
-          "With equal freedom: parallel axis (2 fitted) "
-          f"{pc(m(pl)['mean'])} / {pc(m(pl)['median'])} % vs solid with a fitted parallel axis "
-          f"{pc(m('solid_parallel_axis')['mean'])} / {pc(m('solid_parallel_axis')['median'])} %; "
-          f"oblique (5) {pc(m(ob)['mean'])} / {pc(m(ob)['median'])} % vs solid with a fitted axis (4) "
-          f"{pc(m('solid_fitted_axis')['mean'])} / {pc(m('solid_fitted_axis')['median'])} %"),
-         ("A cylinder split on its own axis has no off-axis mass: cutting it changes nothing. The "
-          "anatomical radius COM and wrist lie off the pro/sup axis; moving the axis recovers that, "
-          "and the split helps only once the axis is off the centreline.")),
-        ("Mean errors < 5 % for most DOFs",
-         (f"Oblique: wrist {pc(m(ob, group='wrist')['mean'])} %, thumb {pc(m(ob, group='thumb')['mean'])} %, "
-          f"fingers {pc(m(ob, group='fingers')['mean'])} %; "
-          f"solid: wrist {pc(m(so, group='wrist')['mean'])} %, "
-          f"thumb {pc(m(so, group='thumb')['mean'])} %, fingers {pc(m(so, group='fingers')['mean'])} %"),
-         ("The hand is identical in all models; its errors come from the hand hanging in a slightly "
-          "different orientation when the pro/sup axis differs from MoBL's.")),
-        ("The solid model can be wrong by up to 15 %",
-         (f"Solid pro/sup: median {pc(m(so)['median'])} %, mean {pc(m(so)['mean'])} %, max "
-          f"{pc(m(so)['max'])} % (global {pc(m(so, metric='nrmse_global')['mean'])} %)"),
-         ("Its pro/sup torque misses the radius's off-axis gravity torque, which is large against "
-          "the small pro/sup range of many movements.")),
-        ("The split matching the radius's inertia gives the smallest errors",
-         (f"That rule gives split {r['variants'][pa]['placement']['split']:.3f} on the centreline, "
-          f"{r['variants'][pl]['placement']['split']:.3f} with the parallel axis; the best fitted split "
-          f"(with an oblique axis) is {r['variants'][ob]['placement']['split']:.3f}"),
-         ("With the axis on the centreline the split cannot matter (see row 1). The fit turns "
-          f"{pc(1 - r['variants'][ob]['placement']['split'])} % of the cylinder with pro/sup, the "
-          f"rule {pc(1 - r['variants'][pa]['placement']['split'])} % (on the centreline): the rule "
-          "matches an inertia, the fit is chosen for the torques.")),
-        ("Errors grow with body size (numerical integration)",
-         (f"Oblique pro/sup median {sizes[0]} / {sizes[1]} / {sizes[2]} % at the 5th / 50th / 95th; "
-          "held out across sizes: see the validation table"),
-         ("Both engines here solve inverse dynamics exactly; similarity scaling leaves NRMSE "
-          "nearly unchanged.")),
-        ("(implied) the forearm architecture barely affects the elbow",
-         (f"Elbow RMSE: solid {nm(el['rmse']['solid_uniform']['elbow_rmse_mean'])} N·m, mass-matched "
-          f"solid {nm(el['rmse']['solid_mass_matched']['elbow_rmse_mean'])}, oblique "
-          f"{nm(el['rmse']['oblique_uniform']['elbow_rmse_mean'])}, mass-matched oblique "
-          f"{nm(el['rmse']['oblique_mass_matched']['elbow_rmse_mean'])}"),
-         ("A uniform cylinder puts the COM at mid-length; the ulna + radius COM sits proximal of "
-          "that and off its line (elbow table): cylinder geometry, not pro/sup placement.")),
-    ]
-    lines = ["| the paper claims | we find | why |", "|---|---|---|"]
-    lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]
     return "\n".join(lines)
 
 
@@ -271,6 +201,8 @@ def elbow_table(r: dict) -> str:
 GENERATED = {"paper-placements": placements_table, "paper-headline": headline_table,
              "paper-claims": claims_table, "paper-heldout": heldout_table,
              "paper-sensitivity": sensitivity_table, "paper-elbow": elbow_table}
+#: Every generated table: the README/docs blocks and tables.md sections.
+ALL_TABLES = {**GENERATED, **REVIEW_TABLES}
 
 
 def group_table(r: dict, size: str, metric: str) -> str:
@@ -293,7 +225,7 @@ def tables_markdown(results: dict) -> str:
            (f"Torques of every model low-pass filtered at {r['filter']['cutoff_hz']} Hz (zero-phase "
             f"Butterworth, order {r['filter']['order']} per pass), against the anatomical OpenSim reference. "
             f"Fits: {r['objective']}; {r['fit_rate_hz']:.0f} Hz samples."), ""]
-    for key, fn in GENERATED.items():
+    for key, fn in ALL_TABLES.items():
         out += [f"## {key.replace('paper-', '')}", "", fn(r), ""]
     for size in r["body_sizes"]:
         for metric, title in (("nrmse", "per-movement NRMSE, mean / median (%)"),
@@ -308,7 +240,7 @@ def _block(key: str) -> tuple[str, str]:
 
 
 def readme_blocks(results: dict) -> dict[str, str]:
-    return {key: fn(results) for key, fn in GENERATED.items()}
+    return {key: fn(results) for key, fn in ALL_TABLES.items()}
 
 
 def update_readme(path: Path, results: dict) -> None:

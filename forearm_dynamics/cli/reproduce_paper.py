@@ -24,6 +24,7 @@ from ..analysis.errors import global_range
 from ..analysis.filtering import analysis_config, lowpass
 from ..analysis.placement import HEADLINE, OBJECTIVE, VARIANTS, FitCache, Scorer, fit
 from ..analysis.report import errors_json, tables_markdown, update_readme, write_json
+from ..analysis.robustness import robustness
 from ..analysis.sensitivity import sensitivity
 from ..analysis.validation import across_sizes, held_out
 from ..anthropometry import resolve_body_size
@@ -159,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     results["validation"] = validation
     results["elbow"] = elbow_analysis(scorer50, overrides)
     bar.step("elbow")
+    results.update(robustness(ref, overrides, cache, FIT_RATE_HZ, tick=bar.step))
     length = forearm_cylinder(desc, resolve_body_size(50)).length
     all_overrides = {name: fits[name]["overrides"] if name in fits else {} for name in HEADLINE}
     # Sensitivity of the configured (shipped) placements: named ones use the config.
@@ -168,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     results["sensitivity"] = sensitivity(ref, sens_overrides, cache, length,
                                          tick=lambda: bar.step("sensitivity"))
     _figures(args.out, nrmse, overrides, bar)
+    _review_figures(args.out, results)
     cache.save(prune=True)
     results["cache"] = {"hits": cache.hits, "misses": cache.misses}
     results["wall_time_s"] = time.perf_counter() - t0
@@ -177,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.readme is not None:
         update_readme(args.readme, results)
     bar.close()
-    print(f"wrote {args.out}/results.json, tables.md, fig3.png, fig4.png, fig5.png in "
+    print(f"wrote {args.out}/results.json, tables.md, fig3.png ... fig6.png in "
           f"{results['wall_time_s']:.1f} s (cache: {cache.hits} hits, {cache.misses} computed; "
           f"load average {load0[0]:.1f})")
     return 0
@@ -223,6 +226,12 @@ def _figures(out: Path, nrmse: dict, overrides: dict, bar: Progress) -> None:
     plots.error_figure(out / "fig5.png", {s: nrmse["oblique"][s] for s in ("p5", "p50", "p95")},
                        "Segmented model (oblique placement) NRMSE by body size")
     bar.step("fig5")
+
+
+def _review_figures(out: Path, results: dict) -> None:
+    from ..analysis import plots
+
+    plots.ci_figure(out / "fig6.png", results["review"], HEADLINE)
 
 
 if __name__ == "__main__":
