@@ -8,9 +8,15 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup test demo lint bench bench-estimation bench-rate soak reference reproduce clean
+.PHONY: setup browser test demo lint bench bench-estimation bench-rate soak reference reproduce clean
 
-setup: $(VENV)/.installed
+setup: $(VENV)/.installed browser
+
+# The HTML report's test opens it in Debian's chromium (no network needed); CI runs as root.
+browser:
+	@command -v chromium >/dev/null || { test "$$(id -u)" = 0 && \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
+	  echo "warning: chromium is missing (test_html_report needs it): apt-get install chromium" >&2
 
 $(VENV)/.installed: setup.py setup.cfg .ci/requirements.lock
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)

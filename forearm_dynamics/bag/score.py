@@ -51,6 +51,8 @@ class ScoreReport:
     delivery: Delivery
     warnings: list[str]
     failures: list[str] = field(default_factory=list)
+    # what was compared, for the HTML report's plot: common stamps, recorded, reference
+    compared: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def lag_by_xcorr(rec: np.ndarray, ref: np.ndarray, dt: float, max_lag_s: float = MAX_LAG_S) -> float:
@@ -108,6 +110,7 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
         report.failures = _verdicts(report, th)
         return report
     r, x = ref[ia], torques.effort[it[ib]]
+    report.compared = (common, x, r)
     report.duration_s = (common[-1] - common[0]) / 1e9
     err = rmse(x, r)
     ptp = np.ptp(r, axis=0)

@@ -1,7 +1,7 @@
 """check_bag: is a recorded run right? Pipeline error, model error, delivery, in one table.
 
-    check_bag BAG [--json OUT] [--thresholds config/check.yaml] [--reference FILE]
-                  [--max-latency-p99-ms MS]
+    check_bag BAG [--json OUT] [--html REPORT.html] [--thresholds config/check.yaml]
+                  [--reference FILE] [--max-latency-p99-ms MS]
     check_bag BAG --recover OUT
 
 Exit codes (forearm_dynamics.exit_codes) mean correctness, not speed:
@@ -73,6 +73,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("bag", type=Path, help="MCAP file written by bag_recorder (or ros2 bag)")
     ap.add_argument("--json", type=Path, metavar="OUT", help="write the full report as JSON")
+    ap.add_argument("--html", type=Path, metavar="OUT",
+                    help="write the report as one self-contained HTML file (plots of every "
+                         "movement, tables, histograms; opens offline in any browser)")
     ap.add_argument("--thresholds", type=Path, metavar="YAML",
                     help="thresholds (default: the package's config/check.yaml)")
     ap.add_argument("--reference", type=Path, metavar="NPZ",
@@ -275,6 +278,10 @@ def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> 
     report = score.analyse_markerless(rec, choice, th)
     code = DATA if report.failures else OK
     print("\n".join(score.format_score(report, info)))
+    if args.html is not None:
+        from ..offline.html_report import render_segment, write_html
+
+        write_html(args.html, render_segment(report, rec, info, code))
     if args.json is not None:
         args.json.write_text(json.dumps({**score.score_dict(report), "exit_code": code}, indent=1),
                              encoding="utf-8")
@@ -282,6 +289,8 @@ def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> 
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.html is not None and (args.recover is not None or args.baseline is not None):
+        raise ValueError("--html writes a run's check; it does not go with --recover or --baseline")
     if args.recover is not None:
         return _recover(args.bag, args.recover)
     if args.baseline is not None:
@@ -335,6 +344,10 @@ def run(args: argparse.Namespace) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     if args.json is not None:
         args.json.write_text(json.dumps(to_json(report, info, th, code), indent=1), encoding="utf-8")
+    if args.html is not None:
+        from ..offline.html_report import render, write_html
+
+        write_html(args.html, render(report, rec, ref, info, code, latency_lines(report, th)))
     return code
 
 

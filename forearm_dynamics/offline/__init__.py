@@ -1,0 +1,1 @@
+"""Offline evaluation of recorded runs (check, score, regression, delivery, the HTML report)."""
