@@ -56,6 +56,8 @@ class Variant:
     best_effort: bool = False  # receiver QoS (must match the node's output QoS)
     pin: bool = False  # node alone on the last CPU, every other process on the others
     also_input: bool = False  # the receiver also times joint_states (locates a delay's hop)
+    others_fifo: int = 0  # SCHED_FIFO priority of publisher, receiver, recorder (0: normal)
+    pub_args: list[str] = field(default_factory=list)  # extra trajectory_publisher -p pairs
 
     def cpus(self) -> tuple[set[int] | None, set[int] | None]:
         """(node CPUs, other processes' CPUs) for a pinned variant; (None, None) if not."""
@@ -119,13 +121,13 @@ def run_variant(v: Variant, movements: list[int], domain: int, work: Path,
         if v.also_input:
             rx_args += ["--also", "joint_states"]
         rx = Child.module("receiver", "benchmarks.receiver", rx_args, module_env(env), logs,
-                          cpus=other_cpus)
+                          cpus=other_cpus, fifo=v.others_fifo)
         children.append(rx)
         subscribers = 1
         if v.recorder:
             bag = logs / "run.mcap"
             children.append(Child.script("bag_recorder", ["-p", f"output:={bag}"], env, logs,
-                                         cpus=other_cpus))
+                                         cpus=other_cpus, fifo=v.others_fifo))
             subscribers = 2
         if not node.wait_for(NODE_READY, 60):
             raise RuntimeError(f"{v.node} did not start:\n{node.text()[-2000:]}")
@@ -138,8 +140,10 @@ def run_variant(v: Variant, movements: list[int], domain: int, work: Path,
                         "-p", f"min_subscribers:={subscribers}", "-p", "subscriber_timeout:=60.0"]
             if v.best_effort:
                 pub_args += ["-p", "qos_reliable:=false"]
+            pub_args += v.pub_args
             pub_started = time.time()
-            pub = Child.script("trajectory_publisher", pub_args, env, logs, cpus=other_cpus)
+            pub = Child.script("trajectory_publisher", pub_args, env, logs, cpus=other_cpus,
+                               fifo=v.others_fifo)
             children.append(pub)
             sampler.add("publisher", pub.pid)
             duration = 1.5 * len(movements)

@@ -131,11 +131,12 @@ class Child:
     """One started process, its output in `log` (stdout and stderr, or `log` and `err_log`).
 
     `cpus`: CPU affinity of the process and every thread it starts (None: any).
+    `fifo`: SCHED_FIFO priority of the process and every thread it starts (0: normal).
     `split_stderr`: stderr to its own file `err_log` (tests read the two apart).
     """
 
     def __init__(self, name: str, argv: list[str], env: dict[str, str], log_dir: Path,
-                 cpus: set[int] | None = None, split_stderr: bool = False):
+                 cpus: set[int] | None = None, split_stderr: bool = False, fifo: int = 0):
         self.name = name
         self.argv = list(argv)
         log_dir.mkdir(parents=True, exist_ok=True)
@@ -153,20 +154,22 @@ class Child:
             # Popen returns once exec succeeded: the child has one thread, and every thread
             # it starts later (rclpy, Fast DDS) inherits this affinity.
             os.sched_setaffinity(self.proc.pid, cpus)
+        if fifo:  # as for cpus: inherited by every thread it starts
+            os.sched_setscheduler(self.proc.pid, os.SCHED_FIFO, os.sched_param(fifo))
 
     @classmethod
     def script(cls, name: str, ros_args: list[str], env: dict[str, str], log_dir: Path,
                label: str | None = None, cpus: set[int] | None = None,
-               split_stderr: bool = False) -> Child:
+               split_stderr: bool = False, fifo: int = 0) -> Child:
         """A console script of this venv with `--ros-args *ros_args` (if any)."""
         argv = [str(BIN / name)] + (["--ros-args", *ros_args] if ros_args else [])
-        return cls(label or name, argv, env, log_dir, cpus, split_stderr)
+        return cls(label or name, argv, env, log_dir, cpus, split_stderr, fifo)
 
     @classmethod
     def module(cls, name: str, module: str, args: list[str], env: dict[str, str],
-               log_dir: Path, cpus: set[int] | None = None) -> Child:
+               log_dir: Path, cpus: set[int] | None = None, fifo: int = 0) -> Child:
         """`python -m module *args` with this interpreter."""
-        return cls(name, [sys.executable, "-m", module, *args], env, log_dir, cpus)
+        return cls(name, [sys.executable, "-m", module, *args], env, log_dir, cpus, fifo=fifo)
 
     @property
     def pid(self) -> int:

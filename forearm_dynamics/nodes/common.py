@@ -128,6 +128,13 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
         # them so a full garbage collection never walks them while streaming at 1 kHz.
         gc.collect()
         gc.freeze()
+        # Real-time scheduling now: the middleware's threads exist (docs/realtime.md).
+        start_realtime = getattr(node, "start_realtime", None)
+        if callable(start_realtime):
+            start_realtime()
+        on_serving = getattr(node, "on_serving", None)
+        if callable(on_serving):
+            on_serving()
         try:
             spin(node, executor, done=getattr(node, "done", None))
         except (KeyboardInterrupt, ExternalShutdownException):

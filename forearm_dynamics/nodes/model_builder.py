@@ -6,6 +6,8 @@ from __future__ import annotations
 import threading
 from typing import TYPE_CHECKING
 
+from ..realtime import make_normal, set_thread_name
+
 if TYPE_CHECKING:
     from .torque_config import ModelBundle, ModelRequest
     from .torque_node import TorqueNode
@@ -22,6 +24,8 @@ class ModelBuilder:
         self._stop = False
         self._thread = threading.Thread(target=self._run, name="model_builder", daemon=True)
         self._thread.start()
+        self.native_id: int = self._thread.native_id  # set once started
+
 
     def submit(self, request: ModelRequest) -> None:
         with self._cv:
@@ -41,6 +45,10 @@ class ModelBuilder:
         self._thread.join(timeout=2.0)
 
     def _run(self) -> None:
+        # A helper: named for top -H and /proc, and at normal priority whatever its creator
+        # had (a real-time thread would start it at FIFO; docs/realtime.md).
+        set_thread_name("model_builder")
+        make_normal()
         while True:
             with self._cv:
                 while self._request is None and not self._announcements and not self._stop:

@@ -43,17 +43,20 @@ from dataclasses import dataclass
 
 import numpy as np
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from ..bag.jointstate_cdr import STAMP, OutputTemplate
+from ..deadlines import REASONS_INPUT, REASONS_TIMER, Deadlines
+from ..gcwatch import GcWatch
 from . import validation as v
 from .common import CONFIG_TOPIC, EXECUTORS, stream_qos
 from .diagnostics import PipelineStats, diagnostic_array
 from .input_plans import GENERIC, InputPlan, InputPlans
 from .params import Params, Spec, init_node
+from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
@@ -88,6 +91,11 @@ STREAM_SPECS = (
     Spec("max_stamp_gap", 0.0, "a stamp jump larger than this resets the estimator history; "
          f"0 = adaptive: larger than {MIN_ADAPTIVE_GAP_S:g} s and {GAP_PERIODS} x the previous "
          "sample interval", "s", 0.0, 3600.0),
+    Spec("deadline_ms", 1.0, "an output published later than this after its input's arrival "
+         "(with output_rate_hz: after its scheduled time) is a missed deadline, counted per "
+         "reason in /diagnostics and the shutdown summary; it is published all the same; "
+         "0 = not counted", "ms", 0.0, 60000.0),
+    *REALTIME_SPECS,
 )
 
 
@@ -121,7 +129,7 @@ class StreamSettings:
         return settings
 
 
-class JointStreamNode(Node):
+class JointStreamNode(RealtimeNode, Node):
     """Validates joint_states, gathers model-order q/qd, lets compute() fill effort."""
 
     specs: tuple[Spec, ...] = STREAM_SPECS
@@ -133,12 +141,17 @@ class JointStreamNode(Node):
         self.params = Params(self, self.specs, self.config_name or node_name)
         self.settings = StreamSettings.from_params(self.params)
         self.executor_kind = self.settings.executor
+        self.realtime_req = realtime_request(self.params)
         joint_names = self.configure(self.params)  # subclass: model etc.; may raise
         self.params.warn_unknown()
 
         self.joint_names = tuple(joint_names)
         self.names = v.NameMatcher(self.joint_names)
         self.stats = PipelineStats(v.REASONS)
+        timed = getattr(self, "output_rate_hz", 0) > 0
+        self.deadlines = Deadlines(self.params.value("deadline_ms"),
+                                   REASONS_TIMER if timed else REASONS_INPUT)
+        self.gc_watch = GcWatch()
         self._templates: dict[bytes, OutputTemplate] = {}
         self._use_template(self._template(b""))  # self.out, self.q, self.qd, self.effort
         self._shapes = InputPlans(self.names)
@@ -177,7 +190,8 @@ class JointStreamNode(Node):
         resets = ", ".join(f"{k} {n}" for k, n in st.resets.items() if n)
         return (f"summary: received {st.received}, processed {st.published} "
                 f"(warm-up {st.warmup}), rejected {sum(rejected.values())}"
-                + (f" ({why})" if why else "") + (f"; estimator resets: {resets}" if resets else ""))
+                + (f" ({why})" if why else "") + (f"; estimator resets: {resets}" if resets else "")
+                + f"; {self.deadlines.summary()}; scheduling {self.realtime_line()}")
 
     def destroy_node(self) -> None:
         if getattr(self, "stats", None) is not None:
@@ -249,6 +263,7 @@ class JointStreamNode(Node):
         if not warm:
             stats.warmup += 1
         stats.record(t_end - t_start, recv_ns - t_ns, t_end - t_pub)
+        self.deadlines.check_input(recv_ns - t_ns, t_end - t_start)
         if self._announce is not None:
             self.after_publish(sec, nsec)
 
@@ -354,4 +369,13 @@ class JointStreamNode(Node):
     def _publish_diagnostics(self) -> None:
         v.flush_suppressed(self._warned, self.get_logger(), WARN_EVERY_S)
         status = self.stats.status(f"{self.get_name()}: pipeline", self.get_fully_qualified_name())
+        status.values.extend(KeyValue(key=k, value=x) for k, x in self.timing_values().items())
         self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
+
+    def timing_values(self) -> dict[str, str]:
+        """Deadline, real-time and garbage-collection key-values for /diagnostics."""
+        return {**self.deadlines.values(), **self.realtime_values(), **self.gc_watch.values()}
+
+    def on_serving(self) -> None:
+        """run() froze the start-up heap and applied the scheduling: serving starts."""
+        self.gc_watch.serving()

@@ -88,7 +88,7 @@ class TorqueNode(JointStreamNode):
         self._version = package_version()
         self._announce: ModelBundle | None = None  # installed, not yet stated with its stamp
         self._publish_config(self._bundle, 0)
-        self._worker = ModelBuilder(self)
+        self._worker = ModelBuilder(self)  # a helper thread: stays at normal priority
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         if self.output_rate_hz > 0:
@@ -107,6 +107,13 @@ class TorqueNode(JointStreamNode):
         )
 
     # -- start-up ------------------------------------------------------------------------
+    def realtime_helpers(self) -> tuple[int, ...]:
+        return (self._worker.native_id,)
+
+    def on_realtime_applied(self) -> None:
+        self._config_text = {}  # the config states the scheduling the node got: restate it
+        self._publish_config(self._bundle, 0)
+
     def configure(self, params: Params) -> tuple[str, ...]:
         self.output_rate_hz = params.value("output_rate_hz")
         self.input_timeout_ns = round(params.value("input_timeout") * 1e9)
@@ -194,10 +201,13 @@ class TorqueNode(JointStreamNode):
         if late > self._max_backlog_ns:  # too far behind: drop, start again from now
             if due:
                 self.timer_skipped["late"] += late // self._period_ns
+                self.deadlines.dropped(late // self._period_ns, late)
             due = now
         self._due_ns = due + self._period_ns
         if not self._on_timer():
             self._due_ns = now + self._period_ns  # silent: resume on time, no catching up
+        else:
+            self.deadlines.check_timer(now - due, _monotonic_ns() - now)
 
     def _on_timer(self) -> bool:
         """One output stamped now (system clock), from the estimate predicted to now."""
@@ -308,6 +318,9 @@ class TorqueNode(JointStreamNode):
             "output_rate_hz": self.output_rate_hz,
             "input_timeout": self.input_timeout_ns / 1e9,
             "build_ms": round(b.build_ms, 3),
+            "deadline_ms": self.deadlines.deadline_ms if hasattr(self, "deadlines") else None,
+            "realtime": (self.realtime_state.describe() if self.realtime_state is not None
+                         else {"policy": "not applied yet"}),
         }
 
     def _publish_config(self, b: ModelBundle, applies_from: int | None) -> None:
@@ -342,6 +355,7 @@ class TorqueNode(JointStreamNode):
             if self._silent in ("input_timeout", "stamps_behind"):
                 status.level = status.WARN
                 status.message = f"not publishing: {self._silent.replace('_', ' ')}"
+        extra.update(self.timing_values())
         status.values.extend(KeyValue(key=k, value=x) for k, x in extra.items())
         self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
         if self._config_json:
