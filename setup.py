@@ -22,6 +22,8 @@ EXECUTABLES = {
     "bag_torques": "forearm_dynamics.cli.bag_torques:main",
     "mot_to_bag": "forearm_dynamics.cli.mot_to_bag:main",
     "bag_export": "forearm_dynamics.cli.bag_export:main",
+    "arm_viz": "forearm_dynamics.nodes.arm_viz:main",
+    "bag_viz": "forearm_dynamics.cli.bag_viz:main",
 }
 
 setup(

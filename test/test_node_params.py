@@ -16,7 +16,7 @@ from rcl_interfaces.srv import GetParameters
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from forearm_dynamics.nodes import arm_sim_settings, bag_recorder, trajectory_publisher
+from forearm_dynamics.nodes import arm_sim_settings, arm_viz_settings, bag_recorder, trajectory_publisher
 from forearm_dynamics.nodes.params import load_defaults
 from forearm_dynamics.nodes.stream_node import STREAM_SPECS
 from forearm_dynamics.nodes.torque_node import TorqueNode
@@ -24,7 +24,7 @@ from forearm_dynamics.paths import config_dir
 
 SPECS = {"torque_node": TorqueNode.specs, "trajectory_publisher": trajectory_publisher.SPECS,
          "null_echo_node": STREAM_SPECS, "bag_recorder": bag_recorder.SPECS,
-         "arm_sim": arm_sim_settings.SPECS}
+         "arm_sim": arm_sim_settings.SPECS, "arm_viz": arm_viz_settings.SPECS}
 
 
 def test_every_node_yaml_lists_its_parameters() -> None:
