@@ -5,5 +5,13 @@ from .colors import TorqueColours, library_peaks
 from .markers import MarkerFrame, MarkerMaker
 from .scene import ArmScene, LinkShape, PosedShape
 
-__all__ = ["ArmScene", "LinkShape", "MarkerFrame", "MarkerMaker", "PosedShape", "TorqueColours",
-           "library_peaks"]
+__all__ = [
+           "ArmScene",
+           "LinkShape",
+           "MarkerFrame",
+           "MarkerMaker",
+           "PosedShape",
+           "TorqueColours",
+           "foxglove_layout",
+           "library_peaks",
+]
