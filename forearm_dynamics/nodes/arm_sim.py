@@ -6,14 +6,18 @@ Input  sensor_msgs/JointState on `joint_commands`: effort by joint name (N·m); 
 Output sensor_msgs/JointState on `joint_states` every step: the model's 20 joints in
        joint_names order, position (rad), velocity (rad/s) and effort = the torque applied
        over the step that led there (N·m); stamped with the simulated time, which starts at
-       the system clock's time when the node starts and advances exactly 1/rate_hz per step.
+       the system clock's time when the node starts and advances exactly 1/rate_hz per step
+       (in real time also over skipped steps, see below, so it stays on the system clock).
 
 Two modes:
 - real time (lockstep false, the default): a timer steps the arm at rate_hz. Steps are due
   at fixed times from the start (k/rate_hz); a late tick catches up (at most MAX_CATCH_UP_S
-  worth of steps), a longer stall is skipped and counted (the simulated time then falls behind the
-  clock: `behind_ms` in /diagnostics). No accepted command for `command_timeout` s -> zero
-  torque, a WARN line in /diagnostics and one log line (and one when commands are back).
+  worth of steps); the rest of a longer stall is skipped: the arm stands still over it,
+  its stamps jump by the skipped time (a stamp gap: they stay on the system clock, which
+  the reference a controller tracks is stamped with; a closed loop measured 0.3 s of
+  apparent lead after a stall when they did not), counted in /diagnostics (steps_skipped).
+  No accepted command for `command_timeout` s -> zero torque, a WARN line in /diagnostics
+  and one log line (and one when commands are back).
 - lockstep (true): no timer. Each command received advances exactly one step and is
   answered by one joint_states message and one /clock message (rosgraph_msgs/Clock, the
   simulated time), so a controller with use_sim_time runs in the simulation's time, as fast
@@ -41,12 +45,13 @@ import time
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..bag.jointstate_cdr import OutputTemplate
+from ..bag.jointstate_cdr import Layout, NotMine, OutputTemplate, verified_layout
 from ..bag.model_config import model_config
 from ..exit_codes import OK
 from ..simulation import ArmSimulator
@@ -56,9 +61,11 @@ from .common import latched_qos, main_for, stream_qos
 from .diagnostics import _load_average_1min, diagnostic_array
 from .params import ParameterError, Params, init_node
 
-#: Real time: how far (s) one late tick may catch up; a longer stall is skipped. Measured on
-#: 2 cores at load 7 (8 helpers): stalls of 70-85 ms happen every few seconds.
-MAX_CATCH_UP_S = 0.25
+#: Real time: how far (s) one late tick may catch up; the rest of a longer stall is skipped.
+#: Short on purpose: a catch-up is a burst of steps under one held command, i.e. a delay in
+#: a controller's loop; 0.25 s of it (the first choice) made examples/closed_loop.py's 5 Hz
+#: loop unstable after a stall (2 cores at load 15: stalls of 70-300 ms every few seconds).
+MAX_CATCH_UP_S = 0.02
 WARN_EVERY_S = 1.0
 REASONS = ("no_effort", "length_mismatch", "unknown_joint", "duplicate_joint", "non_finite",
            "too_large")
@@ -94,13 +101,15 @@ class ArmSim(Node):
             raise ParameterError("damping", str(exc)) from None
         self.joint_names = s.arm.joint_names
         self._index = {n: i for i, n in enumerate(self.joint_names)}
-        self._names_cache: tuple[list[str], np.ndarray] | None = None
+        # raw commands of the last shape (names, counts): its layout and joint indices
+        self._shape: tuple[Layout, np.ndarray] | None = None
         self.command = np.zeros(self.sim.nv)  # last accepted, N·m
         self._zero = np.zeros(self.sim.nv)
         self.refused = dict.fromkeys(REASONS, 0)
         self.received = self.accepted = 0
         self.timeouts = 0  # times the command timed out (zero torque from then on)
         self.skipped = 0  # real time: steps skipped after a stall
+        self.diverged = 0  # steps whose result was not finite (state kept, at rest)
         self._warned: dict[str, float] = {}
         self._timed_out = False
         self._step_ns: list[int] = []
@@ -120,7 +129,8 @@ class ArmSim(Node):
         self._period_ns = round(1e9 / s.rate_hz)
         self._max_catch_up = max(1, round(MAX_CATCH_UP_S * s.rate_hz))
         self._anchor()
-        self.sub = self.create_subscription(JointState, s.command_topic, self._on_command, qos)
+        self.sub = self.create_subscription(JointState, s.command_topic, self._on_command, qos,
+                                            raw=True)
         self._config_json = json.dumps(self._config())
         self.config_pub.publish(String(data=self._config_json))
         if s.lockstep:
@@ -145,10 +155,10 @@ class ArmSim(Node):
         self._last_cmd_mono = self._start_mono
 
     # -- commands ------------------------------------------------------------------------
-    def _on_command(self, msg: JointState) -> None:
+    def _on_command(self, data: bytes) -> None:
         self.received += 1
         try:
-            self.command = self._parse(msg)
+            self.command = self._parse(data)
             self.accepted += 1
             self._last_cmd_mono = _mono()
             if self._timed_out:
@@ -161,38 +171,54 @@ class ArmSim(Node):
         if self.settings.lockstep:
             self._advance(self.command)
 
-    def _parse(self, msg: JointState) -> np.ndarray:
-        names, effort = msg.name, msg.effort
-        if len(effort) == 0:
-            raise CommandRefused("no_effort", f"no effort for {len(names)} name(s)")
-        if len(effort) != len(names):
-            raise CommandRefused("length_mismatch",
-                                 f"{len(effort)} effort value(s) for {len(names)} name(s)")
-        cache = self._names_cache
-        if cache is not None and cache[0] == names:
-            idx = cache[1]
+    def _parse(self, data: bytes) -> np.ndarray:
+        """The command's torques in model order. Raw CDR: a message of the last shape (the
+        controller's usual one) costs a shape test and a view (jointstate_cdr); another
+        shape is parsed (or deserialised by rclpy), checked and becomes the cached one."""
+        shape = self._shape
+        if shape is not None and shape[0].matches(data):
+            lay, idx = shape
+            effort = lay.array(data, "effort")
+            names = lay.names
         else:
-            idx = np.empty(len(names), dtype=np.intp)
-            for k, n in enumerate(names):
-                i = self._index.get(n)
-                if i is None:
-                    raise CommandRefused("unknown_joint", f"unknown joint name {n!r}")
-                idx[k] = i
-            if len(set(names)) != len(names):
-                dup = next(n for n in names if names.count(n) > 1)
-                raise CommandRefused("duplicate_joint", f"joint {dup!r} named twice")
-            self._names_cache = (list(names), idx)
-        e = np.asarray(effort, dtype=np.float64)
-        if not np.isfinite(e).all():
-            bad = names[int(np.flatnonzero(~np.isfinite(e))[0])]
-            raise CommandRefused("non_finite", f"effort of {bad} is {e[names.index(bad)]!r}")
-        if len(e) and np.abs(e).max() > self.settings.max_torque:
-            k = int(np.abs(e).argmax())
-            raise CommandRefused("too_large", f"effort of {names[k]} is {e[k]:g} N·m, beyond "
+            try:
+                lay = verified_layout(data)
+                names, n_eff = lay.names, lay.n_eff
+            except NotMine:
+                lay = None
+                msg = deserialize_message(data, JointState)
+                names, n_eff = tuple(msg.name), len(msg.effort)
+            idx = self._indices(names, n_eff)
+            if lay is not None:
+                self._shape = (lay, idx)
+                effort = lay.array(data, "effort")
+            else:
+                effort = np.asarray(msg.effort, dtype=np.float64)
+        if not np.isfinite(effort).all():
+            k = int(np.flatnonzero(~np.isfinite(effort))[0])
+            raise CommandRefused("non_finite", f"effort of {names[k]} is {effort[k]!r}")
+        if len(effort) and np.abs(effort).max() > self.settings.max_torque:
+            k = int(np.abs(effort).argmax())
+            raise CommandRefused("too_large", f"effort of {names[k]} is {effort[k]:g} N·m, beyond "
                                  f"max_torque {self.settings.max_torque:g}")
         tau = np.zeros(self.sim.nv)
-        tau[idx] = e
+        tau[idx] = effort
         return tau
+
+    def _indices(self, names: tuple[str, ...], n_effort: int) -> np.ndarray:
+        """Model indices of a command's names, or CommandRefused saying what is wrong."""
+        if n_effort == 0:
+            raise CommandRefused("no_effort", f"no effort for {len(names)} name(s)")
+        if n_effort != len(names):
+            raise CommandRefused("length_mismatch",
+                                 f"{n_effort} effort value(s) for {len(names)} name(s)")
+        unknown = [n for n in names if n not in self._index]
+        if unknown:
+            raise CommandRefused("unknown_joint", f"unknown joint name {unknown[0]!r}")
+        if len(set(names)) != len(names):
+            dup = next(n for n in names if names.count(n) > 1)
+            raise CommandRefused("duplicate_joint", f"joint {dup!r} named twice")
+        return np.array([self._index[n] for n in names], dtype=np.intp)
 
     def _warn(self, key: str, text: str) -> None:
         now = time.monotonic()
@@ -216,8 +242,8 @@ class ArmSim(Node):
         if due > self._max_catch_up:
             self.skipped += due - self._max_catch_up
             self._warn("late", f"{due / self.settings.rate_hz * 1e3:.0f} ms behind: skipping "
-                       f"{due - self._max_catch_up} steps (the simulated time falls behind the "
-                       "clock)")
+                       f"{due - self._max_catch_up} steps (the arm stands still over them; its "
+                       "stamps jump ahead with the clock)")
             due = self._max_catch_up
         timeout = self.settings.command_timeout
         tau = self.command
@@ -234,7 +260,14 @@ class ArmSim(Node):
 
     def _advance(self, tau: np.ndarray) -> None:
         t = _perf()
-        self.sim.step(tau)
+        sim = self.sim
+        q, qd = sim.q, sim.qd
+        sim.step(tau)
+        if not math.isfinite(sim.q.sum() + sim.qd.sum()):  # never publish (or keep) NaN
+            sim.q, sim.qd = q, np.zeros_like(qd)
+            self.diverged += 1
+            self._warn("diverged", f"the step from t={sim.t - sim.dt:.3f} s diverged (torques "
+                       f"{np.abs(tau).max():.3g} N·m at most): kept the last finite posture, at rest")
         self._publish_state(tau)
         if self.diag_pub is not None and len(self._step_ns) < 100_000:
             self._step_ns.append(_perf() - t)
@@ -244,7 +277,7 @@ class ArmSim(Node):
         np.copyto(out.q, self.sim.q)
         np.copyto(out.qd, self.sim.qd)
         np.copyto(out.effort, tau)
-        stamp = self.t0_ns + self.sim.steps * self._period_ns
+        stamp = self.t0_ns + (self.sim.steps + self.skipped) * self._period_ns
         sec, nsec = divmod(stamp, 1_000_000_000)
         out.pack_stamp(sec, nsec)
         self.pub.publish(out.payload())
@@ -270,7 +303,8 @@ class ArmSim(Node):
         times = np.asarray(self._step_ns, dtype=np.int64)
         self._step_ns = []
         p50, p99 = (np.percentile(times, (50, 99)) / 1e3).tolist() if times.size else (math.nan,) * 2
-        behind = ((_mono() - self._start_mono) / 1e9 - self.sim.t) * 1e3
+        behind = ((_mono() - self._start_mono) / 1e9
+                  - (self.sim.steps + self.skipped) / self.settings.rate_hz) * 1e3
         values = {
             "steps_total": str(self.sim.steps), "step_rate_hz": f"{steps / span:.1f}",
             "simulated_time_s": f"{self.sim.t:.3f}",
@@ -280,6 +314,7 @@ class ArmSim(Node):
             "commands_refused": str(sum(self.refused.values())),
             **{f"refused.{k}": str(n) for k, n in self.refused.items()},
             "command_timeouts": str(self.timeouts), "steps_skipped": str(self.skipped),
+            "steps_diverged": str(self.diverged),
             "load_average_1min": _load_average_1min(),
         }
         level, message = DiagnosticStatus.OK, "running"
@@ -303,7 +338,8 @@ class ArmSim(Node):
                 f"summary: {self.sim.steps} steps ({self.sim.t:.3f} s simulated), commands "
                 f"received {self.received}, accepted {self.accepted}, refused "
                 f"{sum(self.refused.values())}" + (f" ({refused})" if refused else "")
-                + f", timeouts {self.timeouts}, steps skipped {self.skipped}")
+                + f", timeouts {self.timeouts}, steps skipped {self.skipped}, diverged "
+                f"{self.diverged}")
         super().destroy_node()
 
 

@@ -15,6 +15,7 @@ from .passive import (
     DEFAULT_DAMPING,
     LIMIT_DAMPING_RATIO,
     LIMIT_FREQUENCY_HZ,
+    effective_inertia,
     joint_bounds,
     limit_gains,
     neutral_posture,
@@ -22,5 +23,5 @@ from .passive import (
 from .simulator import ArmSimulator, SimResult, SimSettings, simulate, total_energy
 
 __all__ = ["DEFAULT_DAMPING", "LIMIT_DAMPING_RATIO", "LIMIT_FREQUENCY_HZ", "METHODS",
-           "ArmSimulator", "SimResult", "SimSettings", "joint_bounds", "limit_gains",
+           "ArmSimulator", "SimResult", "SimSettings", "effective_inertia", "joint_bounds", "limit_gains",
            "neutral_posture", "simulate", "total_energy"]

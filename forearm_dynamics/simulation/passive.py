@@ -7,11 +7,16 @@ eigenvalue of the joint-space mass matrix is 7.4e-8 kg·m²), and a viscous damp
 a joint has the time constant I/c, which explicit RK4 at dt = 1 ms follows only while
 dt·λ_max(M⁻¹C) < 2.785. So:
 
-- DEFAULT_DAMPING = 5e-5 N·m·s/rad on every joint. For the 50th-percentile man that is a
-  ~5 ms time constant on the finger DIP joints (they settle instead of ringing for ever
-  under gravity) and ~30 min on the elbow (no effect on a movement); dt·λ_max = 0.43 at the
-  neutral posture. Larger damping is accepted up to `STABILITY_MARGIN` of the solver's
-  bound (checked at the neutral posture) and refused beyond it, with the joint named.
+- DEFAULT_DAMPING = 1e-7 N·m·s/rad on every joint: small for every joint of every arm.
+  A uniform damping cannot be "small" by one number for an elbow (effective inertia
+  0.042 kg·m², 50th-percentile man) and a fingertip (1.3e-7 kg·m²; female 5th: 5.5e-8):
+  its time constant m/c is 0.5-2 s on the DIP joints (they stop ringing within a few
+  movements) and ~5 days on the elbow. 5e-5 (tried first) made the fingertips
+  over-damped (5 ms), so that a controller that does not know the damping missed finger
+  movements by 0.1 rad (examples/closed_loop.py: computed torque at 5 Hz; 2e-4 rad with
+  1e-7). Larger damping (a real joint's: ~1e-3 to 1 N·m·s/rad) is accepted up to
+  `STABILITY_MARGIN` of the solver's bound (checked at the neutral posture) and refused
+  beyond it, with the joint named: about 3e-4 N·m·s/rad on the DIP joints at 1 kHz.
 - Joint limits (the movement ranges of config/model.yaml, `Joint.lower/upper`) are a
   spring-damper acting only beyond the range. Its stiffness is not one number in N·m/rad
   (a spring stiff enough for the elbow would make the DIP joint unstable, one soft enough
@@ -40,7 +45,7 @@ import pinocchio as pin
 
 from ..dynamics import ArmModel
 
-DEFAULT_DAMPING = 5e-5  # N·m·s/rad, every joint (see the module docstring)
+DEFAULT_DAMPING = 1e-7  # N·m·s/rad, every joint (see the module docstring)
 LIMIT_FREQUENCY_HZ = 50.0  # Hz, natural frequency of every joint's limit spring
 LIMIT_DAMPING_RATIO = 0.3
 #: Real-axis stability bound of dt·λ for each method (RK4: 2.785; semi-implicit Euler: 2),
@@ -68,12 +73,19 @@ def mass_matrix(arm: ArmModel, q: np.ndarray) -> np.ndarray:
     return np.triu(m) + np.triu(m, 1).T
 
 
+def effective_inertia(arm: ArmModel, q=None) -> np.ndarray:
+    """1/(M⁻¹)_jj (kg·m²): the inertia joint j's own torque sees when the others move freely
+    (default posture: neutral). What a spring or a PD gain on joint j must be scaled by."""
+    q = neutral_posture(arm) if q is None else q
+    return 1.0 / np.diag(np.linalg.inv(mass_matrix(arm, q)))
+
+
 def limit_gains(arm: ArmModel, frequency_hz: float = LIMIT_FREQUENCY_HZ,
                 damping_ratio: float = LIMIT_DAMPING_RATIO) -> tuple[np.ndarray, np.ndarray]:
     """(stiffness N·m/rad, damping N·m·s/rad) of each joint's limit spring-damper."""
-    inv_diag = np.diag(np.linalg.inv(mass_matrix(arm, neutral_posture(arm))))
+    m = effective_inertia(arm)
     w = 2.0 * math.pi * frequency_hz
-    return w * w / inv_diag, 2.0 * damping_ratio * w / inv_diag
+    return w * w * m, 2.0 * damping_ratio * w * m
 
 
 def damping_vector(arm: ArmModel, damping: float | Mapping[str, float] | np.ndarray) -> np.ndarray:
@@ -150,5 +162,5 @@ def make_passive(arm: ArmModel, damping, joint_limits: bool) -> PassiveJoints:
 
 
 __all__ = ["DEFAULT_DAMPING", "LIMIT_DAMPING_RATIO", "LIMIT_FREQUENCY_HZ", "PassiveJoints",
-           "check_stability", "damping_vector", "joint_bounds", "limit_gains", "make_passive",
-           "mass_matrix", "neutral_posture"]
+           "check_stability", "damping_vector", "effective_inertia", "joint_bounds",
+           "limit_gains", "make_passive", "mass_matrix", "neutral_posture"]
