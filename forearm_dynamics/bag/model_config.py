@@ -30,7 +30,7 @@ DEFAULT_SIZE = 50
 MODEL_KEYS = frozenset({"schema", "model", "body_size", "side", "payload", "placement", "joint_names"})
 NODE_KEYS = frozenset({"config_id", "applies_from_stamp_ns", "node", "version", "estimator",
                        "input_topic", "output_topic", "max_stamp_gap", "output_rate_hz",
-                       "input_timeout", "build_ms", "deadline_ms", "realtime"})
+                       "input_timeout", "build_ms", "deadline_ms", "realtime", "std"})
 PLACEMENT_KEYS = frozenset({"name", "split", "split_rule", "axis_offset_proximal", "axis_offset_distal",
                             "cylinder"})
 PAYLOAD_KEYS = frozenset({"mass", "com", "inertia"})

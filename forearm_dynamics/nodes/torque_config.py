@@ -32,6 +32,7 @@ from ..estimation import (
 )
 from ..paths import config_file
 from ..payload import make_payload
+from ..uncertainty import NoCovariance, TorqueStd
 from .params import ParameterError, Spec
 
 SIDES = ("right", "left")
@@ -90,6 +91,12 @@ OUTPUT_SPECS = (
          "the estimator's prediction to that time", "Hz", 0.0, 10000.0),
     Spec("input_timeout", 0.2, "with output_rate_hz > 0: stop publishing when no input arrived "
          "for this long (never extrapolate further)", "s", 0.001, 3600.0),
+    Spec("publish_std", True, "publish std_topic: for every output, the same header and names with "
+         "effort = one standard deviation of each torque (N*m; estimation, lag and model parts, "
+         "stated in ~/config; docs/uncertainty.md). Needs an estimator with a covariance (kalman) "
+         "and output_rate_hz 0; otherwise nothing is published there and ~/config says why"),
+    Spec("std_topic", "joint_torques_std", "JointState topic of the torques' standard deviations "
+         "(remappable too)"),
 )
 
 
@@ -209,18 +216,34 @@ class ModelBundle:
     estimator: StateEstimator
     model_config: dict  # the model part of the config message
     build_ms: float
+    std: TorqueStd | None = None  # the torque σ, when asked for and the estimator has a covariance
+    std_config: dict | None = None  # what the config message says about it
 
 
 def build_bundle(request: ModelRequest, config_id: int, n: int,
-                 previous: ModelBundle | None = None) -> ModelBundle:
+                 previous: ModelBundle | None = None, std: str | None = None) -> ModelBundle:
     """Build the model (and the estimator, unless its settings are unchanged: then the
-    running one carries on with its history). ValueError if the core refuses."""
+    running one carries on with its history). ValueError if the core refuses.
+
+    std: None = no σ asked for; else the topic the σ goes to: a TorqueStd is built when the
+    estimator carries a covariance (it keeps the jerk history of the previous one when the
+    estimator carries on), and `std_config` states it or why there is none."""
     t0 = time.perf_counter()
     arm = build_model(request.kind, request.body_size, **request.build_kwargs())
     if previous is not None and request.same_estimator(previous.request):
         est = previous.estimator
     else:
         est = make_estimator(request.estimator, n, request.settings_for(request.estimator))
+    torque_std, std_config = None, {"published": False, "why": "publish_std is false"}
+    if std is not None:
+        try:
+            torque_std = TorqueStd(arm, est)
+        except NoCovariance as exc:
+            std_config = {"published": False, "why": str(exc)}
+        else:
+            if previous is not None and previous.std is not None and previous.estimator is est:
+                torque_std.jerk = previous.std.jerk
+            std_config = {"published": True, "topic": std, **torque_std.parts()}
     ms = (time.perf_counter() - t0) * 1e3
     return ModelBundle(config_id, request, arm, arm.model, arm.data, est,
-                       model_config(arm), ms)
+                       model_config(arm), ms, torque_std, std_config)

@@ -48,15 +48,17 @@ import rclpy
 from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ..version import package_version
 from . import validation as v
-from .common import latched_qos, main_for
+from .common import latched_qos, main_for, stream_qos
 from .diagnostics import diagnostic_array
 from .model_builder import ModelBuilder
 from .params import ParameterError, Params
-from .stream_node import NODE_CONFIG_TOPIC, STREAM_SPECS, JointStreamNode
+from .std_output import StdTemplates
+from .stream_node import NODE_CONFIG_TOPIC, RESERVED_TOPICS, STREAM_SPECS, JointStreamNode
 from .torque_config import (
     LIVE,
     MODEL_SPECS,
@@ -82,6 +84,13 @@ class TorqueNode(JointStreamNode):
 
     def __init__(self, node_name: str = "torque_node"):
         super().__init__(node_name)
+        if self._std_topic is not None:  # joint_torques_std: published by the output hook
+            s = self.settings
+            self.std_pub = self.create_publisher(JointState, self._std_topic,
+                                                 stream_qos(s.qos_depth, s.qos_reliable))
+            self._std_templates = StdTemplates(self.joint_names)
+            self._std_unknown = np.full(len(self.joint_names), np.inf)
+            self.output_hook = self._publish_std
         self.config_pub = self.create_publisher(String, NODE_CONFIG_TOPIC, latched_qos())
         self._config_json = ""
         self._config_text: dict[int, str] = {}
@@ -117,13 +126,24 @@ class TorqueNode(JointStreamNode):
     def configure(self, params: Params) -> tuple[str, ...]:
         self.output_rate_hz = params.value("output_rate_hz")
         self.input_timeout_ns = round(params.value("input_timeout") * 1e9)
+        self._std_topic = None
+        self._std_off_why = "publish_std is false"
+        if params.value("publish_std"):
+            if self.output_rate_hz > 0:
+                self._std_off_why = ("output_rate_hz > 0: the σ of a prediction between samples is "
+                                     "not computed, nothing is published on std_topic")
+            else:
+                self._std_topic = params.topic("std_topic")
+                params.distinct_topics(("input_topic", "output_topic", "std_topic"), RESERVED_TOPICS)
         request = ModelRequest.from_values(params.values(LIVE))
         try:
-            bundle = build_bundle(request, 1, 20)
+            bundle = build_bundle(request, 1, 20, std=self._std_topic)
         except ValueError as exc:
             raise ParameterError("model", str(exc)) from None
         if bundle.arm.nv != bundle.estimator.n:
-            bundle = build_bundle(request, 1, bundle.arm.nv)
+            bundle = build_bundle(request, 1, bundle.arm.nv, std=self._std_topic)
+        self._std_ready = False  # the last output has a σ to publish
+        self._std_known = False  # ... and it is known (else inf: warming up)
         self._bundle = self._latest = bundle
         self._next_id = 2
         self.live_changes = {"applied": 0, "refused": 0, "failed": 0}
@@ -146,8 +166,11 @@ class TorqueNode(JointStreamNode):
             reset = self._install(b) or reset
             b = self._bundle
         est = b.estimator
+        ts = b.std
         if reset:
             est.reset()
+            if ts is not None:
+                ts.reset()
         try:
             warm = est.update(t_ns, self.q, self.qd if velocity_given else None)
         except ValueError as exc:  # the estimator refuses a sample (state unchanged)
@@ -166,12 +189,27 @@ class TorqueNode(JointStreamNode):
         # computed from it and the output message states it ("position and velocity as used")
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
-        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+        if ts is not None:  # computeRNEADerivatives gives τ too: no separate RNEA
+            known = ts.update(t_ns, velocity_given)
+            tau = ts.tau if known else pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+            self._std_ready = True
+            self._std_known = known and warm
+        else:
+            self._std_ready = False
+            tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh
             raise v.Rejection(v.NON_FINITE_TORQUE, "torque overflowed (absurd inputs?)")
         np.copyto(self.effort, tau)
         return warm
+
+    def _publish_std(self, sec: int, nanosec: int) -> None:
+        """Output hook: joint_torques_std for the output just published (same header, names);
+        σ = inf while the estimate is warming up (its error is not what the covariance says)."""
+        if self._std_ready:
+            t = self._std_templates.get(self.out.frame_id)
+            std = self._bundle.std.std if self._std_known else self._std_unknown
+            self.std_pub.publish(t.fill(sec, nanosec, std))
 
     def after_publish(self, sec: int, nanosec: int) -> None:
         """Called after an output is published while a new config awaits its first stamp."""
@@ -286,7 +324,8 @@ class TorqueNode(JointStreamNode):
     def build(self, request: ModelRequest) -> None:
         """Worker thread: build, then publish the bundle with one reference assignment."""
         try:
-            b = build_bundle(request, self._next_id, self._latest.arm.nv, self._latest)
+            b = build_bundle(request, self._next_id, self._latest.arm.nv, self._latest,
+                             std=self._std_topic)
             if b.arm.joint_names != self.joint_names:
                 raise ValueError("its joint names differ from the running model's")
         except (ValueError, TypeError) as exc:
@@ -321,7 +360,16 @@ class TorqueNode(JointStreamNode):
             "deadline_ms": self.deadlines.deadline_ms if hasattr(self, "deadlines") else None,
             "realtime": (self.realtime_state.describe() if self.realtime_state is not None
                          else {"policy": "not applied yet"}),
+            "std": self._std_config(b),
         }
+
+    def _std_config(self, b: ModelBundle) -> dict:
+        if self._std_topic is None:
+            return {"published": False, "why": self._std_off_why}
+        out = dict(b.std_config)
+        if out.get("published") and hasattr(self, "std_pub"):
+            out["topic"] = self.std_pub.topic_name  # as resolved (remapping included)
+        return out
 
     def _publish_config(self, b: ModelBundle, applies_from: int | None) -> None:
         """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None).
