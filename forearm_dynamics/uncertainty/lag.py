@@ -25,11 +25,11 @@ MAX_BASELINE = 256  # samples of q̈ kept per joint (the baseline m is at most t
 
 
 class JerkTracker:
-    """Per joint RMS of the jerk (rad/s³) seen as the change of q̈ over the baseline m."""
+    """Per joint mean square of the jerk ((rad/s³)²) seen as the change of q̈ over m samples."""
 
     def __init__(self, n: int, tau_s: float = JERK_TAU_S):
         self.tau_s = float(tau_s)
-        self.rms = np.zeros(n)
+        self.ms_jerk = np.zeros(n)
         self._ms = np.zeros(n)
         self._ring = np.zeros((MAX_BASELINE + 1, n))
         self._tmp = np.zeros(n)
@@ -40,18 +40,22 @@ class JerkTracker:
         self._t_ns = None
         self._count = 0
         self._ms.fill(0.0)
-        self.rms.fill(0.0)
+        self.ms_jerk.fill(0.0)
+
+    @property
+    def rms(self) -> np.ndarray:
+        return np.sqrt(self.ms_jerk)
 
     def update(self, t_ns: int, qdd: np.ndarray, m: int, noise_var: float) -> np.ndarray:
-        """RMS jerk after the estimate q̈ at t_ns; m the baseline (samples), noise_var the
-        mean square the noise alone gives D ((rad/s²)²)."""
+        """Mean-square jerk after the estimate q̈ at t_ns; m the baseline (samples), noise_var
+        the mean square the noise alone gives D ((rad/s²)²)."""
         ring, c = self._ring, self._count
         np.copyto(ring[c % len(ring)], qdd)
         self._count = c + 1
         if self._t_ns is None or t_ns <= self._t_ns or c < m:
             if self._t_ns is None or t_ns <= self._t_ns:
                 self._t_ns = t_ns
-            return self.rms
+            return self.ms_jerk
         dt = (t_ns - self._t_ns) * 1e-9
         self._t_ns = t_ns
         d = self._tmp
@@ -60,8 +64,8 @@ class JerkTracker:
         d -= self._ms
         d *= min(1.0, dt / self.tau_s)
         self._ms += d
-        np.subtract(self._ms, noise_var, out=self.rms)
-        np.maximum(self.rms, 0.0, out=self.rms)
-        np.sqrt(self.rms, out=self.rms)
-        self.rms *= 1.0 / (m * dt)
-        return self.rms
+        out = self.ms_jerk
+        np.subtract(self._ms, noise_var, out=out)
+        np.maximum(out, 0.0, out=out)
+        out *= 1.0 / (m * dt) ** 2
+        return out

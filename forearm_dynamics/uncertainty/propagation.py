@@ -13,12 +13,12 @@ few small array products (benchmarks/uncertainty.py measures it in the node's ca
 Lag: a causal estimate under a sustained jerk j is biased by e·j (e per unit jerk, (3,),
 the estimator's steady-state error; estimation.kalman.KalmanCA.lag computes it). The
 torque bias of joint j's lag is G_ij j_j with G = e0 A + e1 B + e2 C; with the jerk
-known only as its recent RMS s_j (lag.JerkTracker), the lag part of the variance is
-    σ_lag,i² = k² Σ_j (G_ij s_j)²,
+known only as its recent mean square s_j² (lag.JerkTracker), the lag part of the variance is
+    σ_lag,i² = k² Σ_j G_ij² s_j²,
 k the calibration factor (lag.LAG_GAIN, from benchmarks/uncertainty.py).
 
-All arrays are preallocated per propagator; one call allocates nothing but its temporaries
-of numpy's own (a few (3, n, n) products).
+All arrays are preallocated per propagator; a call allocates nothing but numpy's own
+temporaries.
 """
 
 from __future__ import annotations
@@ -82,8 +82,16 @@ def lag_variance(a: np.ndarray, b: np.ndarray, m: np.ndarray, lag_per_jerk, jerk
 
 
 class Propagator:
-    """σ of τ for one model on the hot path: computeRNEADerivatives (τ included) and the
-    variance of the estimation, lag and model parts, into preallocated arrays.
+    """σ of τ for one model on the hot path, in two steps of different cost.
+
+    `linearise(q, qd, qdd, cov, lag)` (~50 us loaded): computeRNEADerivatives at the state
+    (τ included), the estimation part Var_est and the lag weights GG_ij = (gain G_ij)²;
+    `__call__(..., jerk_ms, relinearise)` every sample: τ (RNEA, or the derivatives' when
+    relinearising), σ_lag² = GG · jerk² (one product with the current jerk) and
+    σ = sqrt(Var_est + σ_lag² + model part + floor). TorqueStd relinearises every
+    RELINEARISE_S of stream time (and whenever the covariance or the lag vector changed):
+    the Jacobians and the noise covariance move on the time scale of the movement, the
+    jerk term is what changes fast, and it is current on every sample.
 
     `tau` (n,) holds the torques of the last call, `var_est`, `var_lag` the two variable
     parts (N·m²) and `std` the total σ (N·m) with the constant model part `model_var`
@@ -99,23 +107,30 @@ class Propagator:
         self.var_est = np.zeros(n)
         self.var_lag = np.zeros(n)
         self.std = np.zeros(n)
+        self._const = np.zeros(n)  # var_est + model part + floor, since the last linearise
+        self._gg = np.zeros((n, n))
         self._d = np.zeros((3, n, n))
-        self._y = np.zeros((3, n, n))
-        self._g = np.zeros((n, n))
-        self._cov_key: tuple | None = None
-        self._lt = np.eye(3)
+        self._y = np.zeros((4, n, n))  # rows: L^T d (3, the estimation part), gain e·d (lag)
+        self._s = np.zeros((3, n))
+        self._w = np.zeros((4, 3))
+        self._w_key: tuple | None = None
 
-    def _shared_factor(self, cov: tuple[float, ...]) -> np.ndarray:
-        """L^T of a shared covariance, recomputed only when it changed (a steady filter's
-        covariance is constant between re-seats)."""
-        if cov != self._cov_key:
-            self._lt = cholesky_rows(np.asarray(cov, float))
-            self._cov_key = cov
-        return self._lt
+    def _weights(self, cov: tuple[float, ...], lag) -> np.ndarray:
+        """W (4, 3): L^T of the shared covariance over gain x the lag vector; rebuilt only when
+        either changed (both are constant between the estimator's refreshes)."""
+        key = (cov, None if lag is None else tuple(lag))
+        if key != self._w_key:
+            self._w[:3] = cholesky_rows(np.asarray(cov, float))
+            self._w[3] = 0.0 if lag is None else self.gain * np.asarray(lag, float)
+            self._w_key = key
+        return self._w
 
-    def __call__(self, q, qd, qdd, cov, lag_per_jerk, jerk_rms) -> np.ndarray:
-        """σ (n,) at the state (q, qd, qdd); cov: (6,) tuple shared by the joints or (n, 6)
-        array; lag_per_jerk (3,) or None (no lag part); jerk_rms (n,)."""
+    def linearise(self, q, qd, qdd, cov, lag_per_jerk) -> None:
+        """Derivatives at the state, τ, Var_est and the lag weights. cov: (6,) tuple shared by
+        the joints or (n, 6) array (COV_KEYS order); lag_per_jerk (3,) or None (no lag part).
+
+        Shared covariance: ONE product W D of the stacked derivatives D = (A, B, M) gives
+        both: rows 0-2 squared and summed over j are Var_est, row 3 squared is GG."""
         data = self.data
         pin.computeRNEADerivatives(self.model, data, q, qd, qdd)
         np.copyto(self.tau, data.tau)
@@ -125,25 +140,32 @@ class Propagator:
         np.copyto(d[2], data.M)
         if isinstance(cov, tuple):
             y = self._y
-            np.dot(self._shared_factor(cov), d.reshape(3, -1), out=y.reshape(3, -1))
-            np.einsum("kij,kij->i", y, y, out=self.var_est)
+            np.dot(self._weights(cov, lag_per_jerk), d.reshape(3, -1), out=y.reshape(4, -1))
+            np.multiply(y, y, out=y)
+            np.sum(y[:3], axis=2, out=self._s)
+            np.sum(self._s, axis=0, out=self.var_est)
+            np.copyto(self._gg, y[3])
         else:
-            y = np.einsum("jkl,lij->kij", cholesky_rows(cov), d)  # per-joint factors
-            np.einsum("kij,kij->i", y, y, out=self.var_est)
-        if lag_per_jerk is None:
-            self.var_lag.fill(0.0)
+            yj = np.einsum("jkl,lij->kij", cholesky_rows(cov), d)  # per-joint factors
+            np.einsum("kij,kij->i", yj, yj, out=self.var_est)
+            if lag_per_jerk is None:
+                self._gg.fill(0.0)
+            else:
+                e = np.asarray(lag_per_jerk, float)
+                g = self.gain * (e[0] * d[0] + e[1] * d[1] + e[2] * d[2])
+                np.multiply(g, g, out=self._gg)
+        np.add(self.var_est, self.model_var, out=self._const)
+        self._const += NUMERIC_FLOOR_VAR
+
+    def __call__(self, q, qd, qdd, cov, lag_per_jerk, jerk_ms, relinearise: bool = True) -> np.ndarray:
+        """σ (n,) at the state; jerk_ms (n,) the mean-square jerk of each joint ((rad/s³)²).
+        relinearise False: τ by RNEA, Var_est and GG from the last linearise()."""
+        if relinearise:
+            self.linearise(q, qd, qdd, cov, lag_per_jerk)
         else:
-            g = self._g
-            e0, e1, e2 = lag_per_jerk
-            np.multiply(d[0], e0, out=g)
-            g += e1 * d[1]
-            g += e2 * d[2]
-            g *= jerk_rms
-            g *= self.gain
-            np.einsum("ij,ij->i", g, g, out=self.var_lag)
+            np.copyto(self.tau, pin.rnea(self.model, self.data, q, qd, qdd))
+        np.dot(self._gg, jerk_ms, out=self.var_lag)
         s = self.std
-        np.add(self.var_est, self.var_lag, out=s)
-        s += self.model_var
-        s += NUMERIC_FLOOR_VAR
+        np.add(self._const, self.var_lag, out=s)
         np.sqrt(s, out=s)
         return s

@@ -41,6 +41,7 @@ from .lag import MAX_BASELINE
 #: the gain-derived quantities are re-derived at most this often (s of stream time) unless the
 #: sample period or the noise belief moved: they change only with those
 _REFRESH_S = 0.25
+_DT_MOVE = math.log(1.05)
 _IDX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
@@ -85,6 +86,8 @@ class StateSource:
         self.baseline = 1
         self._noise: tuple[float, ...] | None = None
         self._t = -math.inf
+        self._dt: float | None = None
+        self._dt_seat = 1.0
         self._key: tuple | None = None
         what = ("the covariance of (q, qd, qdd) that the measurement noise drives through the "
                 f"{est.name} filter's gain (discrete Lyapunov, noise belief of the filter)"
@@ -93,14 +96,19 @@ class StateSource:
                                           "computeRNEADerivatives (dtau/dq, dtau/dqd, M)"}
 
     def refresh(self, t_s: float, velocity_given: bool) -> None:
-        """Re-derive gain, lag, noise covariance if the period or noise moved, or every 0.25 s."""
+        """Re-derive gain, lag, noise covariance if the mean period or the noise belief moved,
+        or every 0.25 s of stream time (about 100 us each: never per sample)."""
         est = self.est
         if est._P is None:
             return
-        dt = est._dt
-        key = (velocity_given, round(dt, 5), est._r, est._r_v if velocity_given else 0.0)
-        if key == self._key and t_s - self._t < _REFRESH_S:
+        # the MEAN period (exponential, ~20 samples), against the one of the last refresh with
+        # 5 % of hysteresis: a jittered stream's dt moves every sample, its settled gain hardly
+        self._dt = dt = est._dt if self._dt is None else self._dt + 0.05 * (est._dt - self._dt)
+        key = (velocity_given, est._r, est._r_v if velocity_given else 0.0)
+        if (key == self._key and t_s - self._t < _REFRESH_S
+                and abs(math.log(dt / self._dt_seat)) < _DT_MOVE):
             return
+        self._dt_seat = dt
         r2 = est._r**2
         rv2 = est._r_v**2 if velocity_given else None
         g, _ = measurement_update(est._prior(dt), r2, rv2)

@@ -17,6 +17,12 @@ from .model_term import model_variance
 from .propagation import Propagator
 from .state_source import state_source
 
+#: the derivatives (∂τ/∂q, ∂τ/∂q̇, M), and with them the estimation part and the lag
+#: weights, are re-evaluated every RELINEARISE_S of stream time (at 1 kHz every 4th sample;
+#: at 250 Hz and below every sample) and whenever the covariance changed; τ and the jerk
+#: term are computed on every sample (propagation.Propagator)
+RELINEARISE_S = 0.004
+
 
 class NoCovariance(ValueError):
     """The estimator carries no covariance: no σ can be propagated from it."""
@@ -43,20 +49,27 @@ class TorqueStd:
         self.gain, self.tau_s = float(gain), float(tau_s)
         self.tau = self.prop.tau
         self.std = self.prop.std
+        self._lin_cov: tuple | None = None  # the covariance object of the last linearisation
+        self._lin_t = 0.0
 
     def reset(self) -> None:
         self.jerk.reset()
+        self._lin_cov = None
 
     def update(self, t_ns: int, velocity_given: bool) -> bool:
         """After est.update(t_ns, ...): τ into self.tau, σ into self.std; False (both
         untouched) while the estimator has no covariance yet (its first sample)."""
         est, src = self.est, self.src
-        src.refresh(t_ns * 1e-9, velocity_given)
-        jrms = self.jerk.update(t_ns, est.qdd, src.baseline, src.delta_noise_var)
+        t_s = t_ns * 1e-9
+        src.refresh(t_s, velocity_given)
+        jerk = self.jerk.update(t_ns, est.qdd, src.baseline, src.delta_noise_var)
         cov = src.cov()
         if cov is None:
             return False
-        self.prop(est.q, est.qd, est.qdd, cov, src.lag if self.use_lag else None, jrms)
+        lin = cov is not self._lin_cov or not 0.0 <= t_s - self._lin_t < RELINEARISE_S
+        if lin:
+            self._lin_cov, self._lin_t = cov, t_s
+        self.prop(est.q, est.qd, est.qdd, cov, src.lag if self.use_lag else None, jerk, lin)
         return True
 
     def parts(self) -> dict:
@@ -69,6 +82,7 @@ class TorqueStd:
                     "x the RMS jerk (change of the qdd estimate over one qdd lag, noise part removed, "
                     f"mean square over {self.tau_s:g} s), through the same "
                     "derivatives (uncertainty/lag.py)") if self.use_lag else "off",
+            "linearised_every_s": RELINEARISE_S,
             "model": (f"model simplification, per DOF constant: {self.model_source}"
                       if self.use_model else "off"),
             "model_std_nm": dict(zip(self.arm.joint_names, np.sqrt(self.model_var).round(6).tolist(),
