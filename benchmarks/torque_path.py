@@ -58,6 +58,7 @@ class Variant:
     also_input: bool = False  # the receiver also times joint_states (locates a delay's hop)
     others_fifo: int = 0  # SCHED_FIFO priority of publisher, receiver, recorder (0: normal)
     pub_args: list[str] = field(default_factory=list)  # extra trajectory_publisher -p pairs
+    also_topic: str = ""  # ... or this topic (e.g. joint_torques_std: its delivery is reported)
 
     def cpus(self) -> tuple[set[int] | None, set[int] | None]:
         """(node CPUs, other processes' CPUs) for a pinned variant; (None, None) if not."""
@@ -118,8 +119,8 @@ def run_variant(v: Variant, movements: list[int], domain: int, work: Path,
         rx_args = ["--topic", "joint_torques", "--out", str(rx_path), "--diag-prefix", v.node]
         if v.best_effort:
             rx_args.append("--best-effort")
-        if v.also_input:
-            rx_args += ["--also", "joint_states"]
+        if v.also_input or v.also_topic:
+            rx_args += ["--also", v.also_topic or "joint_states"]
         rx = Child.module("receiver", "benchmarks.receiver", rx_args, module_env(env), logs,
                           cpus=other_cpus, fifo=v.others_fifo)
         children.append(rx)
@@ -165,6 +166,11 @@ def run_variant(v: Variant, movements: list[int], domain: int, work: Path,
                            pub_started))
     result.update({"expected": expected, "sent": sent, "skipped_by_publisher": skipped,
                    "exit_codes": codes})
+    if v.also_topic:  # its delivery: every torque stamp answered there too
+        also = np.unique(data["also_stamp_ns"])
+        result["also"] = {"topic": v.also_topic, "received": int(data["also_stamp_ns"].size),
+                          "unique": int(also.size),
+                          "missing_vs_torques": int(np.setdiff1d(np.unique(stamp), also).size)}
     return result
 
 

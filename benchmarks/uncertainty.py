@@ -105,6 +105,52 @@ def line(label: str, variant: str, groups: dict) -> str:
     return f"{label:13s} {variant:10s} {cells}  {'met' if met(groups) else 'MISSED'}"
 
 
+FIGURE_MOVEMENT = 3  # wrist_pronation with the elbow flexing: elbow and pro/sup move
+FIGURE_DOFS = ("elbow_flexion", "pro_sup", "wrist_flexion")
+
+
+def figure(arm, path: Path, seed: int = SEED) -> dict:
+    """Torque ± 2σ against the truth for one movement, 100 Hz mocap-like input (0.5 deg):
+    the inner band is the σ without the model part (what covers the same-model truth drawn
+    here), the outer one the published σ (model part included). Returns its coverage."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from forearm_dynamics.movements import movement_library
+
+    mv = movement_library()[FIGURE_MOVEMENT]
+    rate = 100.0
+    t = np.concatenate([np.arange(-round(0.5 * rate), 0) / rate, mv.sample_times(rate)])
+    q, qd, qdd = mv.evaluate(t)
+    rng = np.random.default_rng(seed)
+    out = inverse_dynamics_with_std(arm, t, q + rng.normal(0.0, math.radians(0.5), q.shape))
+    truth = arm.inverse_dynamics_batch(q, qd, qdd)
+    inner = np.sqrt(out.var_est + out.var_lag)
+    fig, axes = plt.subplots(len(FIGURE_DOFS), 1, figsize=(8, 7), sharex=True)
+    cover = {}
+    for ax, name in zip(axes, FIGURE_DOFS, strict=True):
+        j = arm.joint_names.index(name)
+        ok = np.isfinite(out.std[:, j])
+        ax.fill_between(t[ok], (out.tau - 2 * out.std)[ok, j], (out.tau + 2 * out.std)[ok, j],
+                        color="tab:blue", alpha=0.15, lw=0, label="± 2σ published (model part included)")
+        ax.fill_between(t[ok], (out.tau - 2 * inner)[ok, j], (out.tau + 2 * inner)[ok, j],
+                        color="tab:blue", alpha=0.35, lw=0, label="± 2σ estimation + lag")
+        ax.plot(t, out.tau[:, j], color="tab:blue", lw=1, label="torque (node, noisy input)")
+        ax.plot(t, truth[:, j], color="k", lw=1, ls="--", label="truth (exact state, same model)")
+        ax.set_ylabel(f"{name}\nN·m")
+        cover[name] = float(np.mean(np.abs(out.tau - truth)[ok, j] <= 2 * inner[ok, j]))
+    axes[0].set_title(f"{mv.name}, {mv.elbow}: 100 Hz, 0.5 deg noise, kalman (movement {mv.id})")
+    axes[0].legend(fontsize=7, loc="best")
+    axes[-1].set_xlabel("s from the movement start (0.5 s held before)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"path": str(path), "movement": mv.id, "within_2sigma": cover}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--every", type=int, default=1, help="score every N-th movement (tuning: 4)")
@@ -115,6 +161,8 @@ def main(argv=None) -> int:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", default=str(HERE / "uncertainty.json"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--figure", default=str(HERE.parent / "docs" / "uncertainty.png"),
+                    help="torque ± 2σ vs truth for one movement ('' = none)")
     args = ap.parse_args(argv)
     wall = time.perf_counter()
     info = machine()
@@ -146,6 +194,9 @@ def main(argv=None) -> int:
                "zoo": [dict(zip(("label", "rate_hz", "noise_deg", "velocity_noise_dps"), z, strict=True))
                        for z in ZOO],
                "rows": rows, "wall_time_s": time.perf_counter() - wall}
+    if args.figure:
+        section["figure"] = figure(arm, Path(args.figure))
+        print(f"figure {args.figure}: within ±2σ {section['figure']['within_2sigma']}")
     print(f"targets met: {section['targets']['met']}; load {info['loadavg_start']} -> "
           f"{info['loadavg_end']}; {section['wall_time_s']:.0f} s")
     if not args.no_write:
