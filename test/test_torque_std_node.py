@@ -54,7 +54,8 @@ def stamp_of(msg) -> int:
 
 class Run:
     def __init__(self, *args: str, domain: int | None = None):
-        self.proc = rosproc.start("torque_node", "-p", "diagnostics_period:=0.0", *args, domain=domain)
+        self.proc = rosproc.start("torque_node", "-p", "diagnostics_period:=0.0", "-p", "publish_std:=true",
+                                  *args, domain=domain)
         self.peer = rosproc.Peer("std_test", domain=domain)
         node = self.peer.node
         self.pub = node.create_publisher(JointState, "joint_states", stream_qos(1000))

@@ -91,10 +91,12 @@ OUTPUT_SPECS = (
          "the estimator's prediction to that time", "Hz", 0.0, 10000.0),
     Spec("input_timeout", 0.2, "with output_rate_hz > 0: stop publishing when no input arrived "
          "for this long (never extrapolate further)", "s", 0.001, 3600.0),
-    Spec("publish_std", True, "publish std_topic: for every output, the same header and names with "
+    Spec("publish_std", False, "publish std_topic: for every output, the same header and names with "
          "effort = one standard deviation of each torque (N*m; estimation, lag and model parts, "
          "stated in ~/config; docs/uncertainty.md). Needs an estimator with a covariance (kalman) "
-         "and output_rate_hz 0; otherwise nothing is published there and ~/config says why"),
+         "and output_rate_hz 0; otherwise nothing is published there and ~/config says why. Off by "
+         "default: a second message per sample costs more than the budget at 1 kHz "
+         "(benchmarks/uncertainty_cost.py)"),
     Spec("std_topic", "joint_torques_std", "JointState topic of the torques' standard deviations "
          "(remappable too)"),
 )
