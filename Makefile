@@ -38,11 +38,17 @@ lint: setup
 bench: setup
 	ROS_DOMAIN_ID=75 $(PY) -m benchmarks --out benchmarks/results.json
 	ROS_DOMAIN_ID=75 $(PY) benchmarks/torque_node_rate.py --out benchmarks/results.json
+	ROS_DOMAIN_ID=75 $(PY) -m benchmarks.realtime --out benchmarks/results.json
 	$(PY) benchmarks/estimation.py
 
 # torque_node output_rate_hz 1000 from 100 Hz, and live model changes at 1 kHz (~1 min)
 bench-rate: setup
 	ROS_DOMAIN_ID=79 $(PY) benchmarks/torque_node_rate.py --out benchmarks/results.json
+
+# The torque path under 0, 1, 2 CPU hogs, normal vs realtime_priority 50 + lock_memory,
+# alternating runs; output_rate_hz 1000 jitter (~8 min; docs/realtime.md)
+bench-realtime: setup
+	ROS_DOMAIN_ID=83 $(PY) -m benchmarks.realtime --out benchmarks/results.json
 
 # 10 min of looping replay at 1 kHz (make soak SOAK_MINUTES=2 for a shorter run)
 SOAK_MINUTES ?= 10

@@ -147,6 +147,9 @@ INVALID = [
     ("bag_recorder", ["flush_period:=0.0"], "flush_period"),
     ("bag_recorder", ["flush_period:=.nan"], "flush_period"),
     ("bag_recorder", ["compression:=gzip"], "compression"),
+    ("bag_recorder", ["realtime_priority:=100"], "realtime_priority"),
+    ("bag_recorder", ["lock_memory:=2"], "lock_memory"),
+    ("bag_recorder", ["cpu_affinity:=x"], "cpu_affinity"),
 ]
 
 

@@ -52,6 +52,7 @@ from ..bag.schemas import message_class
 from ..exit_codes import USAGE
 from .common import run
 from .params import ParameterError, Params, Spec, init_node
+from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 
 NAME = "bag_player"
 PROGRESS_PERIOD_NS = 500_000_000
@@ -74,6 +75,7 @@ SPECS = (
     Spec("drain", 2.0, "wait at the end for reliable subscribers to acknowledge", "s", 0.0, 600.0),
     Spec("busy_wait_us", 0, "time before each due time spent busy-waiting instead of sleeping",
          "us", 0, 100_000),
+    *REALTIME_SPECS,
 )
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT,
@@ -122,7 +124,7 @@ def _check_decodes(pl: Playlist, classes: list[type]) -> None:
                                      f"as {topic.channel.schema_name} ({type(exc).__name__})") from None
 
 
-class BagPlayer(Node):
+class BagPlayer(RealtimeNode, Node):
     """Publishers per topic; a playback thread; `done` when played (and drained)."""
 
     def __init__(self, bag_path: str, node_name: str = NAME):
@@ -140,6 +142,7 @@ class BagPlayer(Node):
         self.start_delay = p.value("start_delay")
         self.drain = p.value("drain")
         self.busy_wait_ns = 1000 * p.value("busy_wait_us")
+        self.realtime_req = realtime_request(p)  # applied by run() before the spin
         p.warn_unknown()
         try:
             self.playlist: Playlist = load_playlist(open_bag(bag_path), topics, timing, start_offset)
@@ -271,7 +274,7 @@ class BagPlayer(Node):
         late = np.array(self.late_ns, float) / 1e6 if self.late_ns else np.zeros(1)
         return (f"done: {int(self.sent.sum())} messages ({counts}), {self.loops} pass(es); "
                 f"lateness p50 {np.percentile(late, 50):.3f} ms, p99 {np.percentile(late, 99):.3f} ms, "
-                f"max {late.max():.3f} ms")
+                f"max {late.max():.3f} ms; scheduling {self.realtime_line()}")
 
     def destroy_node(self) -> None:
         self._stop.set()

@@ -54,6 +54,7 @@ from ..bag.writer import COMPRESSION
 from ..exit_codes import DATA, OK
 from .common import CONFIG_TOPIC, latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, Spec, init_node
+from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
@@ -83,6 +84,7 @@ SPECS = (
     Spec("flush_period", FLUSH_PERIOD_S, "an open chunk is closed after this long anyway", "s",
          0.01, 3600.0),
     Spec("compression", "zstd", "chunk compression", choices=tuple(COMPRESSION)),
+    *REALTIME_SPECS,
 )
 
 
@@ -138,7 +140,7 @@ def _topic_qos(qos: QoSProfile) -> TopicQos:
                     durability=qos.durability.name.lower(), history=qos.history.name.lower())
 
 
-class BagRecorder(Node):
+class BagRecorder(RealtimeNode, Node):
     """Raw subscriptions -> BagWriter; `done` completes when recording must stop (write failure)."""
 
     def __init__(self, node_name: str = "bag_recorder"):
@@ -150,6 +152,7 @@ class BagRecorder(Node):
         flush_period = p.value("flush_period")
         compression = p.value("compression")
         output = p.value("output")
+        self.realtime_req = realtime_request(p)  # applied by run() before the spin
         p.warn_unknown()
         resolved = []
         for plan in plans:
