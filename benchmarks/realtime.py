@@ -116,6 +116,53 @@ def _intervals(path: Path) -> dict:
             "receive_jitter_ms": percentiles(np.abs(np.diff(recv) / 1e6 - 1.0))}
 
 
+def arm_sim_run(mode: str, hogs: int, seconds: float, domain: int, work: Path,
+                hog_limit: float) -> dict:
+    """arm_sim in real-time mode (1 kHz steps, zero torque) timed at a FIFO-60 receiver."""
+    from forearm_dynamics.processes import Sampler, ros_env
+
+    from . import module_env
+
+    logs = work / f"arm_sim_{mode}_h{hogs}"
+    env = ros_env(domain, logs)
+    rx_path = logs / "rx.npz"
+    hog_children = start_hogs(hogs, work, hog_limit)
+    children: list[Child] = []
+    load0 = loadavg()
+    try:
+        sim = Child.script("arm_sim", ["-p", "command_timeout:=0.05",
+                                       *(RT_ARGS if mode == "realtime" else [])], env, logs)
+        children.append(sim)
+        rx = Child.module("receiver", "benchmarks.receiver",
+                          ["--topic", "joint_states", "--out", str(rx_path), "--diag-prefix", "arm_sim"],
+                          module_env(env), logs, fifo=OTHERS_FIFO)
+        children.append(rx)
+        if not rx.wait_for("receiver: matched", 60):
+            raise RuntimeError(f"receiver never matched arm_sim:\n{sim.text()[-2000:]}")
+        time.sleep(2.0)  # past start-up
+        with Sampler({"arm_sim": sim.pid}) as sampler:
+            t0 = time.time()
+            time.sleep(seconds)
+            t1 = time.time()
+            sampler.sample()
+        for c in reversed(children):
+            c.stop()
+    finally:
+        for c in children + hog_children:
+            c.stop()
+    data = np.load(rx_path)
+    recv = data["recv_ns"]
+    recv = recv[(recv >= t0 * 1e9) & (recv <= t1 * 1e9)]
+    d = _diag_last(logs)
+    iv = np.diff(recv) / 1e6
+    return {"mode": mode, "hogs": hogs, "seconds": seconds, "loadavg_start": load0,
+            "received": int(recv.size), "rate_hz": float((recv.size - 1) / (t1 - t0)),
+            "receive_interval_ms": percentiles(iv), "receive_jitter_ms": percentiles(np.abs(iv - 1.0)),
+            "steps_skipped": d.get("steps_skipped"), "behind_ms": d.get("behind_ms"),
+            "realtime_policy": d.get("realtime.policy"),
+            "cpu_percent": sampler.series["arm_sim"].cpu_percent(t0, t1)}
+
+
 def summarise(runs: list[dict]) -> dict:
     """Per (hogs, mode): the median over repetitions of each latency figure, summed counts."""
     out: dict = {}
@@ -165,6 +212,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reps", type=int, default=2)
     ap.add_argument("--hogs", default="0,1,2")
     ap.add_argument("--rate-movements", type=int, default=4, help="output_rate_hz 1000 runs; 0 = none")
+    ap.add_argument("--only-arm-sim", action="store_true", help="only the arm_sim runs "
+                    "(the section's other keys are kept from the file)")
+    ap.add_argument("--arm-sim-seconds", type=float, default=10.0, help="arm_sim runs; 0 = none")
     ap.add_argument("--hog-limit", type=float, default=120.0, help="a hog ends itself after this (s)")
     env_domain = int(os.environ.get("ROS_DOMAIN_ID") or 0)
     ap.add_argument("--domain", type=int, default=env_domain or 83)
@@ -179,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     movements = list(range(1, args.movements + 1))
     hog_counts = [int(h) for h in args.hogs.split(",")]
     runs, rate_runs = [], []
-    for hogs in hog_counts:
+    for hogs in ([] if args.only_arm_sim else hog_counts):
         for rep in range(1, args.reps + 1):
             order = ("normal", "realtime") if rep % 2 else ("realtime", "normal")
             for mode in order:
@@ -192,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"CPU {r['node_cpu_percent'] or np.nan:.0f} %, load {r['loadavg_start']}",
                       file=sys.stderr, flush=True)
                 runs.append(r)
-    if args.rate_movements:
+    if args.rate_movements and not args.only_arm_sim:
         hogs = max(hog_counts)
         for mode in ("normal", "realtime"):
             r = one_run(mode, hogs, 1, list(range(1, args.rate_movements + 1)), domain, work,
@@ -203,16 +253,38 @@ def main(argv: list[str] | None = None) -> int:
                   f"missed {r['deadline'].get('missed_total')} of {r['deadline'].get('checked_total')}",
                   file=sys.stderr, flush=True)
             rate_runs.append(r)
+    sim_runs = []
+    if args.arm_sim_seconds:
+        hogs = max(hog_counts)
+        for mode in ("normal", "realtime", "realtime", "normal"):
+            r = arm_sim_run(mode, hogs, args.arm_sim_seconds, domain, work, args.hog_limit)
+            j = r["receive_jitter_ms"]
+            print(f"[realtime] arm_sim 1 kHz, {hogs} hog(s), {mode}: {r['rate_hz']:.1f} Hz, jitter "
+                  f"p50/p99/max {j.get('p50', np.nan):.3f}/{j.get('p99', np.nan):.3f}/"
+                  f"{j.get('max', np.nan):.2f} ms, steps skipped {r['steps_skipped']}, load "
+                  f"{r['loadavg_start']}", file=sys.stderr, flush=True)
+            sim_runs.append(r)
+    provenance = {"command": "python -m benchmarks.realtime " + " ".join(argv or sys.argv[1:]),
+                  "started": started}
+    if args.only_arm_sim:  # the arm_sim key only; the rest of the section as it was
+        import json
+
+        try:
+            old = json.loads(args.out.read_text()).get("realtime") or {}
+        except (OSError, ValueError):
+            old = {}
+        old["arm_sim"] = sim_runs
+        old["arm_sim_provenance"] = provenance
+        write_json(args.out, merge_results(args.out, {"realtime": old}, provenance, sections=[]))
+        return 0
     summary = summarise(runs)
     section = {"movements": len(movements), "reps": args.reps, "hogs": hog_counts,
                "others_fifo": OTHERS_FIFO, "realtime_args": RT_ARGS,
                "machine": {**machine_info(), "loadavg_end": loadavg()},
                "wall_time_s": time.monotonic() - t_start,
                "summary": summary, "goals": goals(summary, max(hog_counts)),
-               "runs": runs, "output_rate_1000": rate_runs}
-    merged = merge_results(args.out, {"realtime": section},
-                           {"command": "python -m benchmarks.realtime " + " ".join(argv or sys.argv[1:]),
-                            "started": started})
+               "runs": runs, "output_rate_1000": rate_runs, "arm_sim": sim_runs}
+    merged = merge_results(args.out, {"realtime": section}, provenance)
     write_json(args.out, merged)
     for k, s in summary.items():
         print(f"{k:14s} p50/p99/p99.9/max {s['latency_p50_ms']:.3f}/{s['latency_p99_ms']:.3f}/"

@@ -60,6 +60,7 @@ from .arm_sim_settings import SPECS, ArmSimSettings
 from .common import latched_qos, main_for, stream_qos
 from .diagnostics import _load_average_1min, diagnostic_array
 from .params import ParameterError, Params, init_node
+from .scheduling import RealtimeNode, realtime_request
 
 #: Real time: how far (s) one late tick may catch up; the rest of a longer stall is skipped.
 #: Short on purpose: a catch-up is a burst of steps under one held command, i.e. a delay in
@@ -79,13 +80,14 @@ class CommandRefused(ValueError):
         self.reason = reason
 
 
-class ArmSim(Node):
+class ArmSim(RealtimeNode, Node):
     """One ArmSimulator, a command input, a state output, diagnostics and config."""
 
     def __init__(self, node_name: str = "arm_sim"):
         init_node(self, node_name)
         self.params = Params(self, SPECS, "arm_sim")
         s = self.settings = ArmSimSettings.from_params(self.params)
+        self.realtime_req = realtime_request(self.params)  # applied by run() before the spin
         self.params.warn_unknown()
         self.executor_kind = s.executor
         self.exit_code = OK
@@ -316,6 +318,7 @@ class ArmSim(Node):
             "command_timeouts": str(self.timeouts), "steps_skipped": str(self.skipped),
             "steps_diverged": str(self.diverged),
             "load_average_1min": _load_average_1min(),
+            **self.realtime_values(),
         }
         level, message = DiagnosticStatus.OK, "running"
         if self._timed_out:

@@ -15,6 +15,7 @@ from ..estimation import DEFAULT_ESTIMATOR
 from ..simulation import DEFAULT_DAMPING, METHODS, SimSettings
 from .common import EXECUTORS
 from .params import ParameterError, Params, Spec
+from .scheduling import REALTIME_SPECS
 from .torque_config import MODEL_SPECS, ModelRequest
 
 #: torque_node's model parameters, one definition: read-only here (a running simulation
@@ -61,7 +62,7 @@ SIM_SPECS = (
          0.0, 3600.0),
 )
 
-SPECS = (*SIM_MODEL_SPECS, *SIM_SPECS)
+SPECS = (*SIM_MODEL_SPECS, *SIM_SPECS, *REALTIME_SPECS)
 
 
 @dataclass(frozen=True)
