@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bag_torques.py [--samples 100000] [--out benchmarks/bag_torques.json]
 
 A synthetic 1 kHz joint_states bag (20 joints, positions + velocities) is turned into
-torques by the `bag_torques` code path: read (jointstream), estimate + inverse dynamics
+torques by the `bag_torques` code path: read (codec.jointstate), estimate + inverse dynamics
 (compute), write the new bag. Reported per estimator: compute samples/s (target from
 issue 11: >= 100 000) and end-to-end samples/s including reading and writing; baseline
 in the same run: the torque node's per-sample path (estimator.update + pin.rnea in a
@@ -34,10 +34,10 @@ def main() -> int:
     from bagkit import write_stream_bag
 
     from forearm_dynamics.bag import open_bag
-    from forearm_dynamics.bag.jointstream import read_joint_stream
-    from forearm_dynamics.bag.torques import bag_torques, compute
+    from forearm_dynamics.codec.jointstate import read_joint_series
     from forearm_dynamics.dynamics import build_model
     from forearm_dynamics.estimation import make_estimator
+    from forearm_dynamics.offline.torques import bag_torques, compute
 
     work = Path(tempfile.mkdtemp(prefix="bench_bag_torques_"))
     src = work / "src.mcap"
@@ -45,7 +45,7 @@ def main() -> int:
     arm = build_model("segmented", 50)
     load_before = os.getloadavg()
     t = time.perf_counter()
-    stream = read_joint_stream(open_bag(src), "joint_states", arm.joint_names)
+    stream = read_joint_series(open_bag(src), "joint_states", arm.joint_names)
     read_s = time.perf_counter() - t
     out = {"command": f"python benchmarks/bag_torques.py --samples {args.samples}",
            "when": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),

@@ -43,7 +43,6 @@ from pathlib import Path
 
 import numpy as np
 
-from forearm_dynamics.analysis.filtering import analysis_config, lowpass
 from forearm_dynamics.description import DOF_GROUPS, JOINT_NAMES
 from forearm_dynamics.dynamics import build_model
 from forearm_dynamics.estimation import (
@@ -52,6 +51,7 @@ from forearm_dynamics.estimation import (
     RECOMMENDED_FOR_MEASURED_INPUT,
     make_estimator,
 )
+from forearm_dynamics.filtering import analysis_config, lowpass
 from forearm_dynamics.movements import movement_library
 
 HERE = Path(__file__).resolve().parent

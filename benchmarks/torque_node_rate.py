@@ -215,7 +215,7 @@ def measure_switch(domain: int, work: Path, seconds: float) -> dict:
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
 
-    from forearm_dynamics.bag.model_config import config_in_force, model_from_config
+    from forearm_dynamics.model_config import config_in_force, model_from_config
     from forearm_dynamics.nodes.common import stream_qos
 
     rng = np.random.default_rng(7)

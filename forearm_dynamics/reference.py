@@ -8,7 +8,7 @@ File format (`forearm_dynamics/data/reference_torques.npz`, a NumPy .npz, deflat
   rate_hz       ()              sampling rate; sample k is at t = k / rate_hz from the start
   joint_names   (20,)           column order (= forearm_dynamics.JOINT_NAMES)
   meta          ()              JSON: engine and version, model kind, generator command
-Raw inverse dynamics (unfiltered); filter with analysis.filtering.lowpass as the paper did.
+Raw inverse dynamics (unfiltered); filter with filtering.lowpass as the paper did.
 
 Encoding (3x smaller than float64, exact to 5e-13 N·m): torques rounded to integer
 pico-newton-metres (int64), second differences along time (the torques are smooth, so these

@@ -40,7 +40,8 @@ def recorded(path: Path, topic: str, after_ns: int = 0) -> int:
 
     A recorder may match a writer that joined the graph only at Fast DDS's next participant
     announcement (~3 s, later on a loaded machine): tests wait on this, not on a fixed time."""
-    from forearm_dynamics.bag import BagError, open_bag
+    from forearm_dynamics.bag import open_bag
+    from forearm_dynamics.errors import BagError
 
     try:
         return sum(m.log_time > after_ns for _ch, m in open_bag(path).messages([topic]))

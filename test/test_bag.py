@@ -20,15 +20,17 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES
-from forearm_dynamics.bag import (
-    BagError,
-    BagWriteError,
-    BagWriter,
-    TopicQos,
-    open_bag,
-    recover,
-)
+from forearm_dynamics.bag import BagWriter, TopicQos, open_bag, recover
 from forearm_dynamics.bag.schemas import DELIMITER, message_definition
+from forearm_dynamics.errors import (
+    BagEmpty,
+    BagError,
+    BagNoData,
+    BagWriteError,
+    NotMcap,
+    OutputDirMissing,
+)
+from forearm_dynamics.exit_codes import USAGE
 
 T0 = 1_700_000_000_000_000_000
 N_STATES = 6000
@@ -221,16 +223,16 @@ def test_damaged_chunk(sample_bag, tmp_path) -> None:
 
 
 @pytest.mark.parametrize(("content", "kind"), [
-    (b"", "empty"),
-    (os.urandom(4096), "not_mcap"),
-    (b"\x89MCAP0\r\n" + b"\x01\xff\xff", "no_data"),
+    (b"", BagEmpty),
+    (os.urandom(4096), NotMcap),
+    (b"\x89MCAP0\r\n" + b"\x01\xff\xff", BagNoData),
 ])
 def test_bad_files(tmp_path, content, kind) -> None:
     path = tmp_path / "bad.mcap"
     path.write_bytes(content)
     with pytest.raises(BagError) as exc:
         open_bag(path)
-    assert exc.value.kind == kind
+    assert type(exc.value) is kind and kind.exit_code == USAGE
     assert "\n" not in str(exc.value) and str(path) in str(exc.value)
 
 
@@ -247,7 +249,7 @@ def test_writer_refuses_overwrite_and_missing_dir(tmp_path) -> None:
     assert existing.read_bytes() == b"keep me"
     with pytest.raises(BagWriteError, match="does not exist") as exc:
         BagWriter(tmp_path / "no" / "such" / "dir.mcap")
-    assert exc.value.kind == "missing"
+    assert isinstance(exc.value, OutputDirMissing) and exc.value.exit_code == USAGE
 
 
 def test_disk_full_is_a_clear_error() -> None:

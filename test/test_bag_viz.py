@@ -19,8 +19,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from forearm_dynamics import build_model, get_movement
 from forearm_dynamics.bag import BagWriter, open_bag
-from forearm_dynamics.bag.model_config import model_config
 from forearm_dynamics.cli.bag_viz import main as bag_viz
+from forearm_dynamics.model_config import model_config
 from forearm_dynamics.viz import ArmScene, MarkerMaker, TorqueColours
 
 pytestmark = pytest.mark.unit

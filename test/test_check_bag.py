@@ -20,8 +20,8 @@ from std_msgs.msg import String
 
 from forearm_dynamics import build_model, get_movement
 from forearm_dynamics.bag import BagWriter, TopicQos
-from forearm_dynamics.bag.model_config import model_config
 from forearm_dynamics.cli.check_bag import main as check_bag
+from forearm_dynamics.model_config import model_config
 from forearm_dynamics.paths import config_file
 from forearm_dynamics.reference import save_reference
 
@@ -328,7 +328,7 @@ def test_foreign_bags_exit_2(tmp_path, reference, run, needle, capsys) -> None:
 
 def test_run_without_markers_is_scored_as_one_segment(tmp_path, reference, capsys) -> None:
     """No markers (any recording): not refused any more, analysed against its own filtered
-    positions (bag/score.py; details in test_check_markerless.py)."""
+    positions (offline/score.py; details in test_check_markerless.py)."""
     bag = tmp_path / "nomarkers.mcap"
     write_run(bag, Run(markers=False, movements=(1,)))
     code, text = _check(bag, reference, capsys=capsys)
@@ -347,7 +347,7 @@ def test_garbage_payloads_exit_2(tmp_path, reference, capsys) -> None:
             w.write(tq, os.urandom(300), 2 + k)
     code, text = _check(bag, reference, capsys=capsys)
     assert code == 2
-    assert len(text.strip().splitlines()) == 1 and "cannot analyse" in text
+    assert len(text.strip().splitlines()) == 1 and "does not decode as JointState" in text
 
 
 def test_json_report_keys_are_documented(good_bag, reference, tmp_path, capsys) -> None:

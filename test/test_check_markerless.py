@@ -15,7 +15,7 @@ from std_msgs.msg import String
 
 from forearm_dynamics import build_model
 from forearm_dynamics.bag import BagWriter, TopicQos
-from forearm_dynamics.bag.model_config import model_config
+from forearm_dynamics.model_config import model_config
 
 N = 8000  # 8 s at 1 kHz
 

@@ -35,7 +35,8 @@ from faultkit import (
 from rclpy.serialization import serialize_message
 from rosbags.rosbag2 import Reader
 
-from forearm_dynamics.bag import BagWriteError, BagWriter, open_bag, recover
+from forearm_dynamics.bag import BagWriter, open_bag, recover
+from forearm_dynamics.errors import BagWriteError
 
 
 @pytest.fixture

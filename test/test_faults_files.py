@@ -169,7 +169,7 @@ FOREIGN = {
                          "no movement marker names a known movement"),
     "other_robot_joints": (lambda w: _torques(w, names=["hip", "knee", "ankle"]),
                            "no joint_torques message carries an effort for every joint"),
-    "torques_of_another_type": (_torques_as_strings, "cannot analyse"),
+    "torques_of_another_type": (_torques_as_strings, "does not decode as JointState"),
     "no_torque_messages": (lambda w: (w.add_topic("/joint_torques", "sensor_msgs/msg/JointState"),
                                       _other_topics(w)), "holds no message"),
 }

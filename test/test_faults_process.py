@@ -37,7 +37,8 @@ from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from forearm_dynamics.bag import BagError, open_bag
+from forearm_dynamics.bag import open_bag
+from forearm_dynamics.errors import BagError
 from forearm_dynamics.nodes.common import stream_qos
 from forearm_dynamics.paths import config_file
 
@@ -204,7 +205,7 @@ def test_torque_node_killed_and_restarted(procs, tmp_path) -> None:
     # The config is republished with every /diagnostics message (0.5 s here): the recording
     # holds the new node's config too, logged after the kill (a latched message alone
     # reaches a running recorder only at Fast DDS's next heartbeat, ~3 s).
-    from forearm_dynamics.bag.model_config import model_from_config
+    from forearm_dynamics.model_config import model_from_config
 
     logged = [(m.log_time, json.loads(deserialize_message(m.data, String).data))
               for _ch, m in bag.messages(["/torque_node/config"])]
@@ -358,7 +359,7 @@ def _judge(rec, path: Path, sig: str, phase: str, ref_states, ref_torques, domai
         assert sig == "SIGKILL" and phase == "start-up", exc
         chk = check_bag_cli(str(path), domain=domain)
         assert chk.returncode == 2 and len(chk.stderr.strip().splitlines()) == 1, chk.stderr
-        return row + f"  {path.stat().st_size} B, nothing readable ({exc.kind}); check_bag exit 2"
+        return row + f"  {path.stat().st_size} B, nothing readable ({type(exc).__name__}); check_bag exit 2"
     states = joint_series(bag, "joint_states")["stamp"]
     torques = joint_series(bag, "joint_torques")
     assert _contiguous(states, ref_states), "recorded joint_states have a hole"

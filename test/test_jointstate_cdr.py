@@ -1,4 +1,4 @@
-"""The hand-written JointState CDR parser (bag/jointstate_cdr.py) against rclpy's own
+"""The hand-written JointState CDR parser (codec/jointstate_cdr.py) against rclpy's own
 (de)serialiser: every field layout, alignment case and rejection, then property-tested.
 
 The parser's promise: for bytes it accepts (parse_layout + verify_layout) and for every
@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
-from forearm_dynamics.bag.jointstate_cdr import (
+from forearm_dynamics.codec.jointstate_cdr import (
     ENCAPSULATION,
     NotMine,
     OutputTemplate,

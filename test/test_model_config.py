@@ -1,5 +1,5 @@
 """The config message torque_node states (nodes/torque_config.py) and its strict reader
-(bag/model_config.py): exactly what was built, for every model, read back to the same
+(model_config.py): exactly what was built, for every model, read back to the same
 torques; anything unexpected refused with the key named; the config in force per stamp."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from forearm_dynamics import build_model
-from forearm_dynamics.bag.model_config import config_in_force, model_config, model_from_config
+from forearm_dynamics.model_config import config_in_force, model_config, model_from_config
 from forearm_dynamics.nodes.params import ParameterError
 from forearm_dynamics.nodes.torque_config import ModelRequest, build_bundle
 
@@ -137,3 +137,27 @@ def test_live_request_validation_speaks_ros_parameters() -> None:
     assert b2.estimator is b1.estimator  # model only: the estimator keeps its history
     b3 = build_bundle(ModelRequest.from_values({**values, "estimator.accel_cutoff_hz": 5.0}), 3, 20, b2)
     assert b3.estimator is not b2.estimator and b3.estimator.values["accel_cutoff_hz"] == 5.0
+
+
+def test_every_writer_writes_what_the_reader_reads(tmp_path) -> None:
+    """bag_torques' config (with its source_bag) is read back by the one reader: the message
+    is written and read by model_config.py alone (the `source_bag` refusal of issue 17)."""
+    from forearm_dynamics.offline.torques import config_message as offline_config
+
+    arm = build_model("solid", 95, side="left")
+    for estimator in ("backward", "zero_phase"):
+        cfg = json.loads(json.dumps(offline_config(arm, estimator, None, tmp_path / "in.mcap",
+                                                   "/joint_states", "/joint_torques", 0.1, None)))
+        assert cfg["source_bag"] == str(tmp_path / "in.mcap") and cfg["node"] == "bag_torques"
+        back = model_from_config(cfg).arm
+        np.testing.assert_array_equal(back.inverse_dynamics(Q, QD, QDD), arm.inverse_dynamics(Q, QD, QDD))
+
+
+def test_the_writer_refuses_a_key_the_reader_would_refuse() -> None:
+    from forearm_dynamics.model_config import NODE_KEYS, config_message
+
+    part = model_config(build_model("segmented", 50))
+    with pytest.raises(KeyError, match="source_bags"):
+        config_message(part, node="x", source_bags="typo")
+    full = config_message(part, **dict.fromkeys(NODE_KEYS, None))
+    assert set(full) == set(part) | NODE_KEYS

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from forearm_dynamics import JOINT_NAMES, get_movement, movement_library
-from forearm_dynamics.analysis.filtering import lowpass
 from forearm_dynamics.description import load_description
+from forearm_dynamics.filtering import lowpass
 from forearm_dynamics.movements import min_jerk
 
 IDX = {n: i for i, n in enumerate(JOINT_NAMES)}

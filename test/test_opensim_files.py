@@ -13,7 +13,7 @@ from rosbags.highlevel import AnyReader
 from rosproc import BIN, ros_env
 
 from forearm_dynamics import JOINT_NAMES, build_model
-from forearm_dynamics.bag.opensim import read_motion
+from forearm_dynamics.formats.opensim import read_motion
 
 START = 1000.0  # s: stamps start here
 # MoBL / ARMS coordinate -> our joint (the shipped map; signs +1)

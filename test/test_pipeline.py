@@ -132,8 +132,8 @@ def test_demo_plot_keeps_to_its_movement(run):
     """The plotted window holds every sample of its movement and none of the next one's
     (on a loaded machine a movement's stamps can end before or after t0 + duration)."""
     from forearm_dynamics.bag import open_bag
-    from forearm_dynamics.bag.decode import read_recording
     from forearm_dynamics.cli.demo_plot import movement_window
+    from forearm_dynamics.offline.recording import read_recording
 
     bag, _, _ = run
     rec = read_recording(open_bag(bag), JOINT_NAMES)

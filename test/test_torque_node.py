@@ -17,8 +17,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES, build_model
-from forearm_dynamics.bag.model_config import model_from_config
 from forearm_dynamics.description import load_description
+from forearm_dynamics.model_config import model_from_config
 from forearm_dynamics.nodes.common import CONFIG_TOPIC, latched_qos, stream_qos
 
 MODEL = build_model("segmented", 50)

@@ -30,7 +30,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES
-from forearm_dynamics.bag.model_config import config_in_force, model_from_config
+from forearm_dynamics.model_config import config_in_force, model_from_config
 from forearm_dynamics.nodes.common import stream_qos
 
 MS = 1_000_000

@@ -7,10 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..dynamics import ArmModel
+from ..filtering import lowpass
 from ..movements import default_stop_rule, movement_library
 from ..reference import ReferenceTorques
 from .errors import ErrorSet, movement_errors
-from .filtering import lowpass
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .filtering import analysis_config
+from ..filtering import analysis_config
 
 
 @dataclass(frozen=True)

@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..description import DOF_GROUPS, JOINT_NAMES
+from ..filtering import lowpass
 from ..movements import movement_library
 from .axes import READINGS, ulna_axis_torques
 from .comparison import Trials, filtered_torques
 from .errors import ErrorSet, global_range, movement_errors, summarize
-from .filtering import lowpass
 from .placement import HEADLINE, VARIANTS, Scorer
 from .statistics import cluster_bootstrap_mean, clusters_of, one_sample, paired
 

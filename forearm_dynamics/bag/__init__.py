@@ -6,7 +6,6 @@
 - recover: a truncated bag rewritten as a complete one.
 """
 
-from .errors import BagError, BagWriteError
 from .reader import Bag, BagInfo, ChannelInfo, open_bag
 from .recover import RecoverResult, recover
 from .rosbag2_meta import TopicQos
@@ -16,9 +15,7 @@ __all__ = [
     "CHUNK_SIZE",
     "FLUSH_PERIOD_S",
     "Bag",
-    "BagError",
     "BagInfo",
-    "BagWriteError",
     "BagWriter",
     "ChannelInfo",
     "RecoverResult",

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BagError
+from ..errors import BagMissing, BagNoData, ForeignBag, SchemaError, UsageError
 from .reader import Bag, ChannelInfo
 from .rosbag2_meta import QOS_KEY, parse_qos_yaml
 
@@ -39,7 +39,7 @@ def bag_file(path: str | os.PathLike) -> Path:
         return path
     files = sorted(path.glob("*.mcap"))
     if len(files) != 1:
-        raise BagError("missing", f"{path}: a directory with {len(files)} .mcap files; "
+        raise BagMissing(f"{path}: a directory with {len(files)} .mcap files; "
                        + ("name one of them (split bags are played one file at a time)" if files
                           else "not a rosbag2 MCAP bag"))
     return files[0]
@@ -106,7 +106,7 @@ def load_playlist(bag: Bag, topics: list[str], timing: str = "log",
                   start_offset_s: float = 0.0) -> Playlist:
     """The chosen topics' messages; BagError (one line) for what cannot be played."""
     if timing not in TIMINGS:
-        raise BagError("usage", f"timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
+        raise UsageError(f"timing must be one of {', '.join(TIMINGS)}, got {timing!r}")
     info = bag.info
     warnings = []
     if not info.complete:
@@ -116,10 +116,10 @@ def load_playlist(bag: Bag, topics: list[str], timing: str = "log",
     for name in topics:
         ch = info.find_topic(name)
         if ch is None:
-            raise BagError("foreign", f"{info.path}: no topic {name!r} (topics: "
+            raise ForeignBag(f"{info.path}: no topic {name!r} (topics: "
                            f"{', '.join(sorted(info.topic_counts())) or 'none'})")
         if ch.message_encoding != "cdr":
-            raise BagError("foreign", f"{info.path}: topic {ch.topic} is {ch.message_encoding!r}, "
+            raise ForeignBag(f"{info.path}: topic {ch.topic} is {ch.message_encoding!r}, "
                            "not ROS 2 CDR; cannot republish it")
         if any(p.channel.id == ch.id for p in chosen):
             continue
@@ -134,7 +134,7 @@ def load_playlist(bag: Bag, topics: list[str], timing: str = "log",
         stamp = 0
         if chosen[k].header:
             if len(data) < 12:
-                raise BagError("schema", f"{info.path}: a {ch.topic} message of {len(data)} bytes "
+                raise SchemaError(f"{info.path}: a {ch.topic} message of {len(data)} bytes "
                                "is too short for its header; the bag's messages do not decode")
             stamp = read_stamp(data)
         idx.append(k)
@@ -144,7 +144,7 @@ def load_playlist(bag: Bag, topics: list[str], timing: str = "log",
         chosen[k].count += 1
     empty = [p.channel.topic for p in chosen if p.count == 0]
     if empty:
-        raise BagError("no_data", f"{info.path}: no message on {', '.join(empty)}"
+        raise BagNoData(f"{info.path}: no message on {', '.join(empty)}"
                        + (f" before the damage ({info.problem})" if not info.complete else ""))
     idx_a = np.array(idx, np.int64)
     logs_a = np.array(logs, np.int64)
@@ -152,7 +152,7 @@ def load_playlist(bag: Bag, topics: list[str], timing: str = "log",
     if timing == "stamp":
         hdr = np.array([chosen[k].header for k in idx], bool)
         if not hdr.any():
-            raise BagError("foreign", f"{info.path}: timing 'stamp' needs a topic with a header "
+            raise ForeignBag(f"{info.path}: timing 'stamp' needs a topic with a header "
                            f"(none of {', '.join(p.channel.topic for p in chosen)} has one)")
         times = logs_a.copy()
         times[hdr] = stamps_a[hdr]
@@ -166,7 +166,7 @@ def load_playlist(bag: Bag, topics: list[str], timing: str = "log",
     skip = round(start_offset_s * 1e9)
     sel = rel >= skip
     if not sel.any():
-        raise BagError("usage", f"start_offset {start_offset_s:g} s is past the end of the bag "
+        raise UsageError(f"start_offset {start_offset_s:g} s is past the end of the bag "
                        f"({rel[-1] / 1e9:.3f} s)")
     keep = order[sel]
     absolute = absolute[sel]

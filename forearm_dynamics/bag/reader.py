@@ -22,7 +22,7 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 
-from .errors import BagError
+from ..errors import BagDamaged, BagEmpty, BagMissing, BagNoData, BagUnreadable, NotMcap
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -145,7 +145,7 @@ def _scan(path: Path, info: BagInfo, want: set[int] | None = None) -> Iterator[t
             if first:
                 first = False
                 if not isinstance(rec, Header):
-                    raise BagError("unreadable", f"{path}: MCAP magic but no header record")
+                    raise BagUnreadable(f"{path}: MCAP magic but no header record")
                 info.profile, info.library = rec.profile, rec.library
             elif isinstance(rec, Schema):
                 schemas[rec.id] = rec
@@ -163,7 +163,7 @@ def _scan(path: Path, info: BagInfo, want: set[int] | None = None) -> Iterator[t
             elif isinstance(rec, Metadata):
                 info.metadata.append((rec.name, dict(rec.metadata)))
     if first:
-        raise BagError("no_data", f"{path}: truncated to {info.size} bytes, before the end of "
+        raise BagNoData(f"{path}: truncated to {info.size} bytes, before the end of "
                        "its header record; nothing to read")
 
 
@@ -224,7 +224,7 @@ class Bag:
                 except StopIteration:
                     return
                 except Exception as exc:  # noqa: BLE001 - damage inside an indexed file
-                    raise BagError("damaged", f"{self.info.path}: damaged chunk ({exc}); "
+                    raise BagDamaged(f"{self.info.path}: damaged chunk ({exc}); "
                                    "`check_bag BAG --recover OUT` keeps the chunks before it") from None
                 yield self.info.channels[channel.id], message
 
@@ -237,16 +237,16 @@ def open_bag(path: str | os.PathLike, scan: bool = False) -> Bag:
     """
     path = Path(path)
     if not path.exists():
-        raise BagError("missing", f"{path}: no such file")
+        raise BagMissing(f"{path}: no such file")
     if not path.is_file():
-        raise BagError("missing", f"{path}: not a file")
+        raise BagMissing(f"{path}: not a file")
     size = path.stat().st_size
     if size == 0:
-        raise BagError("empty", f"{path}: empty file (0 bytes)")
+        raise BagEmpty(f"{path}: empty file (0 bytes)")
     with open(path, "rb") as fh:
         head = fh.read(len(MAGIC))
     if head != MAGIC:
-        raise BagError("not_mcap", f"{path}: not an MCAP file (bad magic bytes)")
+        raise NotMcap(f"{path}: not an MCAP file (bad magic bytes)")
     info = BagInfo(path=path, size=size, complete=True)
     if not scan and _read_summary(path, info):
         return Bag(info, indexed=True)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from .errors import BagError
+from ..errors import BagNoData, OutputExists
 from .reader import open_bag
 from .rosbag2_meta import ROSBAG2_METADATA, SERIALIZED_METADATA_KEY
 from .writer import BagWriter
@@ -62,11 +62,11 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *, overwrite: bool =
     """Copy every readable message of `src` into a new complete bag `dst`."""
     src, dst = Path(src), Path(dst)
     if src.resolve() == dst.resolve():
-        raise BagError("exists", f"{dst}: recover needs a different output file than its input")
+        raise OutputExists(f"{dst}: recover needs a different output file than its input")
     bag = open_bag(src, scan=True)
     info = bag.info
     if info.message_count == 0:
-        raise BagError("no_data", f"{src}: nothing to recover (no complete chunk with messages; "
+        raise BagNoData(f"{src}: nothing to recover (no complete chunk with messages; "
                        f"{info.problem or 'no messages'})")
     writer = BagWriter(dst, overwrite=overwrite, library=info.library or None,
                        custom_data=custom_data(info.metadata))

@@ -21,7 +21,7 @@ import sys
 from functools import lru_cache
 from pathlib import Path
 
-from .errors import BagError
+from ..errors import SchemaError
 
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
@@ -40,7 +40,7 @@ def split_type(type_name: str) -> tuple[str, str, str]:
     """'sensor_msgs/msg/JointState' or 'sensor_msgs/JointState' -> (pkg, 'msg', Type)."""
     m = _TYPENAME.match(type_name)
     if not m:
-        raise BagError("schema", f"{type_name!r} is not a ROS type name (pkg/msg/Type)")
+        raise SchemaError(f"{type_name!r} is not a ROS type name (pkg/msg/Type)")
     return m.group(1), m.group(2) or "msg", m.group(3)
 
 
@@ -61,7 +61,7 @@ def message_class(type_name: str) -> type:
     try:
         return getattr(importlib.import_module(f"{pkg}.{ns}"), name)
     except (ImportError, AttributeError):
-        raise BagError("schema", f"message type {type_name!r} is not installed") from None
+        raise SchemaError(f"message type {type_name!r} is not installed") from None
 
 
 def share_dirs(package: str) -> list[Path]:
@@ -94,7 +94,7 @@ def _interface_file(type_name: str, suffix: str) -> Path | None:
 def _msg_text(type_name: str) -> str:
     path = _interface_file(type_name, ".msg")
     if path is None:
-        raise BagError("schema", f"no .msg file for {type_name!r} in "
+        raise SchemaError(f"no .msg file for {type_name!r} in "
                        + ", ".join(str(d) for d in share_dirs(split_type(type_name)[0])))
     return path.read_text(encoding="utf-8")
 
@@ -116,7 +116,7 @@ def message_definition(type_name: str) -> str:
 
     def expand(name: str, depth: int) -> str:
         if depth > 50:
-            raise BagError("schema", f"dependency loop while resolving {type_name!r}")
+            raise SchemaError(f"dependency loop while resolving {type_name!r}")
         text = _msg_text(name)
         out = [text]
         for dep in _dependencies(text, split_type(name)[0]):

@@ -34,7 +34,7 @@ from mcap.opcode import Opcode
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
-from .errors import BagWriteError
+from ..errors import BagWriteError, OutputDirMissing, OutputExists, OutputNotCreated
 from .rosbag2_meta import (
     HASH_KEY,
     QOS_KEY,
@@ -123,20 +123,19 @@ def open_exclusive(path: Path, overwrite: bool = False) -> int:
     """Open for writing; refuse an existing file unless asked; one clear error otherwise."""
     flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
     if path.is_dir():
-        raise BagWriteError(f"cannot create {path}: it is a directory", "exists")
+        raise OutputExists(f"cannot create {path}: it is a directory")
     try:
         return os.open(path, flags | getattr(os, "O_CLOEXEC", 0), 0o644)
     except FileExistsError:
-        raise BagWriteError(f"{path} exists already; refusing to overwrite it", "exists") from None
+        raise OutputExists(f"{path} exists already; refusing to overwrite it") from None
     except FileNotFoundError as exc:
         if path.parent.is_dir():  # e.g. under /proc: the directory exists, files cannot be made
-            raise BagWriteError(f"cannot create {path}: {exc.strerror}", "missing") from None
-        raise BagWriteError(f"cannot create {path}: directory {path.parent} does not exist",
-                            "missing") from None
+            raise OutputDirMissing(f"cannot create {path}: {exc.strerror}") from None
+        raise OutputDirMissing(f"cannot create {path}: directory {path.parent} does not exist") from None
     except IsADirectoryError:
-        raise BagWriteError(f"cannot create {path}: it is a directory", "exists") from None
+        raise OutputExists(f"cannot create {path}: it is a directory") from None
     except OSError as exc:
-        raise BagWriteError(f"cannot create {path}: {exc.strerror or exc}") from None
+        raise OutputNotCreated(f"cannot create {path}: {exc.strerror or exc}") from None
 
 
 class BagWriter:
@@ -174,7 +173,7 @@ class BagWriter:
             if not overwrite:  # we created it: do not leave an empty, headerless file behind
                 self.path.unlink(missing_ok=True)
             if isinstance(exc, BagWriteError):
-                raise BagWriteError(f"cannot write to {self.path}: {exc.why}") from None
+                raise OutputNotCreated(f"cannot write to {self.path}: {exc.why}") from None
             raise
 
     # -- schema and channel registration -----------------------------------------------

@@ -22,12 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bag import BagError, open_bag
-from ..bag.jointstream import read_joint_stream
-from ..bag.opensim import CoordinateMap, MotionError, write_table
+from ..bag import open_bag
+from ..codec.jointstate import read_joint_series
 from ..description import JOINT_NAMES
+from ..errors import ForeignBag
 from ..exit_codes import OK, USAGE
-from .common import die
+from ..formats.opensim import CoordinateMap, write_table
+from .common import die, guarded
 from .mot_to_bag import METADATA
 
 PROG = "bag_export"
@@ -61,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not args.overwrite:
         return die(f"{PROG}: error: {out} exists already; refusing to overwrite it (--overwrite)", USAGE)
     bag = open_bag(args.bag)
-    s = read_joint_stream(bag, args.topic, JOINT_NAMES, effort=True)
+    s = read_joint_series(bag, args.topic, JOINT_NAMES, effort=True)
     if not np.isfinite(s.effort).any(axis=0).all():
         missing = [j for j, ok in zip(JOINT_NAMES, np.isfinite(s.effort).any(axis=0), strict=True) if not ok]
-        raise BagError("foreign", f"{args.bag}: {s.topic} carries no effort for {', '.join(missing[:4])}"
+        raise ForeignBag(f"{args.bag}: {s.topic} carries no effort for {', '.join(missing[:4])}"
                        f"{' ...' if len(missing) > 4 else ''}: not joint torques of this model")
     order = np.argsort(s.stamp_ns, kind="stable")
     stamps = s.stamp_ns[order]
@@ -94,14 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    try:
-        return run(args)
-    except (BagError, MotionError) as exc:
-        return die(f"{PROG}: error: {exc}", USAGE)
-    except (OSError, ValueError) as exc:
-        return die(f"{PROG}: error: {exc}", USAGE)
-    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
-        return die(f"{PROG}: error: {args.bag}: cannot export ({type(exc).__name__}: {exc})", USAGE)
+    return guarded(PROG, run, args, f"{args.bag}: cannot export")
 
 
 if __name__ == "__main__":

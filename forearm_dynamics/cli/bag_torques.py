@@ -20,13 +20,12 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..bag import BagError
-from ..bag.torques import ESTIMATORS, bag_torques
 from ..builders import MODEL_KINDS
 from ..dynamics import build_model
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..exit_codes import OK, USAGE
-from .common import body_size_arg, die
+from ..offline.torques import ESTIMATORS, bag_torques
+from .common import body_size_arg, die, guarded
 
 PROG = "bag_torques"
 
@@ -100,14 +99,7 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    try:
-        return run(args)
-    except BagError as exc:
-        return die(f"{PROG}: error: {exc}", USAGE)
-    except (OSError, ValueError) as exc:
-        return die(f"{PROG}: error: {exc}", USAGE)
-    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
-        return die(f"{PROG}: error: {args.input}: cannot compute ({type(exc).__name__}: {exc})", USAGE)
+    return guarded(PROG, run, args, f"{args.input}: cannot compute")
 
 
 if __name__ == "__main__":

@@ -29,10 +29,11 @@ from pathlib import Path
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 
-from ..bag import BagError, BagWriter, TopicQos, open_bag
-from ..bag.model_config import config_in_force, model_from_config
+from ..bag import BagWriter, TopicQos, open_bag
+from ..codec.jointstate import TorqueReader
+from ..errors import BagError, ForeignBag
 from ..exit_codes import OK
-from ..nodes.arm_markers import TorqueReader
+from ..model_config import config_in_force, model_from_config
 from ..viz import ArmScene, MarkerMaker, TorqueColours
 from ..viz.marker_cdr import marker_array_cdr
 from .common import die
@@ -89,7 +90,7 @@ def bag_viz(args) -> dict:
     info = bag.info
     torques = info.find_topic("joint_torques")
     if torques is None or info.counts.get(torques.id, 0) == 0:
-        raise BagError("foreign", f"{args.input}: no joint_torques messages (topics: "
+        raise ForeignBag(f"{args.input}: no joint_torques messages (topics: "
                        f"{', '.join(sorted(info.topic_counts())) or 'none'})")
     configs = []
     cfg_ch = info.find_topic(CONFIG)
@@ -139,7 +140,7 @@ def bag_viz(args) -> dict:
                     _, q, tau = reader.decode(maker.scene.joint_names)
                     frame = maker.frame(q, tau)
                 except ValueError as exc:
-                    raise BagError("foreign", f"{args.input}: joint_torques at stamp {stamp}: "
+                    raise ForeignBag(f"{args.input}: joint_torques at stamp {stamp}: "
                                    f"{exc}") from None
                 w.write(markers_ch, marker_array_cdr(frame, maker.scene.root_frame, stamp,
                                                      key != current), msg.log_time)

@@ -16,8 +16,8 @@ Exit codes (forearm_dynamics.exit_codes) mean correctness, not speed:
             movement), or a bad argument: one line, no traceback.
 A truncated bag that still holds data is analysed, with a warning. A bag without movement
 markers (any recording) is scored as one segment against its own filtered positions
-(bag/score.py: reported, gated only on loss and non-finite torques); `--baseline OLD`
-compares two runs' torques stamp by stamp (bag/regression.py: exit 1 above --tolerance or
+(offline/score.py: reported, gated only on loss and non-finite torques); `--baseline OLD`
+compares two runs' torques stamp by stamp (offline/regression.py: exit 1 above --tolerance or
 on any unmatched sample).
 
 The --json report (NRMSE values are fractions there: 0.01 = 1 %; times in ms or ns as named):
@@ -54,15 +54,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bag import BagError, open_bag, recover
-from ..bag.check import CheckReport, MovementResult, analyse
-from ..bag.decode import read_config, read_recording
-from ..bag.model_config import model_from_config
-from ..bag.thresholds import Thresholds
+from ..bag import open_bag, recover
+from ..errors import BagNoData, ForeignBag
 from ..exit_codes import DATA, OK
+from ..model_config import model_from_config
 from ..movements import get_movement, movement_library
+from ..offline.check import CheckReport, MovementResult, analyse
+from ..offline.recording import read_config, read_recording
+from ..offline.thresholds import Thresholds
 from ..reference import ReferenceTorques, load_reference, read_reference
-from .common import die
+from .common import guarded
 
 PROG = "check_bag"
 
@@ -255,7 +256,7 @@ def _recover(src: Path, dst: Path) -> int:
 
 
 def _regression(args: argparse.Namespace) -> int:
-    from ..bag import regression
+    from ..offline import regression
 
     rep = regression.compare(args.bag, args.baseline, args.tolerance)
     code = DATA if rep.failures else OK
@@ -267,10 +268,10 @@ def _regression(args: argparse.Namespace) -> int:
 
 
 def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> int:
-    from ..bag import score
+    from ..offline import score
 
     if rec.joint_states is None or len(rec.joint_states) == 0:
-        raise BagError("foreign", f"{args.bag}: no movement markers and no joint_states: "
+        raise ForeignBag(f"{args.bag}: no movement markers and no joint_states: "
                        "nothing to compute a reference from")
     if not info.complete:
         rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
@@ -303,22 +304,22 @@ def run(args: argparse.Namespace) -> int:
     bag = open_bag(args.bag)
     info = bag.info
     if info.message_count == 0:
-        raise BagError("no_data", f"{args.bag}: no messages"
+        raise BagNoData(f"{args.bag}: no messages"
                        + (f" recovered ({info.problem})" if info.problem else ""))
     torques_ch = info.find_topic("joint_torques")
     if torques_ch is None:
-        raise BagError("foreign", f"{args.bag}: no joint_torques topic (topics: "
+        raise ForeignBag(f"{args.bag}: no joint_torques topic (topics: "
                        f"{', '.join(sorted(info.topic_counts())) or 'none'}); not a forearm_dynamics run")
     if info.counts.get(torques_ch.id, 0) == 0:
         why = f"truncated ({info.problem}) before its first complete chunk with joint_torques" \
             if not info.complete else "joint_torques was recorded but holds no message"
-        raise BagError("no_data", f"{args.bag}: {why}")
+        raise BagNoData(f"{args.bag}: {why}")
     # The config first (it names the model, hence the joint order), then one pass for the rest.
     config, config_warnings = read_config(bag)
     try:
         choice = model_from_config(config)
     except (ValueError, TypeError, KeyError) as exc:
-        raise BagError("foreign", f"{args.bag}: torque_node/config names a model that cannot be "
+        raise ForeignBag(f"{args.bag}: torque_node/config names a model that cannot be "
                        f"built ({exc})") from None
     rec = read_recording(bag, choice.arm.joint_names)
     rec.warnings[:0] = config_warnings
@@ -326,10 +327,10 @@ def run(args: argparse.Namespace) -> int:
         return _markerless(args, rec, choice, th, info)
     if not any(_known_movement(m.id) for m in rec.markers):
         ids = sorted({m.id for m in rec.markers})
-        raise BagError("foreign", f"{args.bag}: no movement marker names a known movement (ids "
+        raise ForeignBag(f"{args.bag}: no movement marker names a known movement (ids "
                        f"{ids[:5]}{' ...' if len(ids) > 5 else ''}; known 1..{len(movement_library())})")
     if not np.isfinite(rec.joint_torques.effort).all(axis=1).any():
-        raise BagError("foreign", f"{args.bag}: no joint_torques message carries an effort for every "
+        raise ForeignBag(f"{args.bag}: no joint_torques message carries an effort for every "
                        f"joint of the {choice.arm.kind} model; not this model's torques")
     if not info.complete:
         rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
@@ -353,14 +354,7 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    try:
-        return run(args)
-    except BagError as exc:
-        return die(f"{PROG}: error: {exc}")
-    except (OSError, ValueError) as exc:
-        return die(f"{PROG}: error: {exc}")
-    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
-        return die(f"{PROG}: error: {args.bag}: cannot analyse ({type(exc).__name__}: {exc})")
+    return guarded(PROG, run, args, f"{args.bag}: cannot analyse")
 
 
 if __name__ == "__main__":

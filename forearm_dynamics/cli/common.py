@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 
+from ..errors import ForearmDynamicsError, exit_code_of
 from ..exit_codes import USAGE
 
 
@@ -12,6 +14,23 @@ def die(message: str, code: int = USAGE) -> int:
     """One clear line on stderr, no traceback; returns the exit code."""
     print(message, file=sys.stderr)
     return code
+
+
+def guarded(prog: str, run: Callable[[argparse.Namespace], int], args: argparse.Namespace,
+            what: str) -> int:
+    """run(args), every error one line on stderr with its exit code (errors.exit_code_of).
+
+    what: names the input and the verb for an unexpected error, e.g. "BAG: cannot analyse";
+    a bad file must never end in a traceback.
+    """
+    try:
+        return run(args)
+    except ForearmDynamicsError as exc:
+        return die(f"{prog}: error: {exc}", exit_code_of(exc))
+    except (OSError, ValueError, KeyError) as exc:
+        return die(f"{prog}: error: {exc}", USAGE)
+    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
+        return die(f"{prog}: error: {what} ({type(exc).__name__}: {exc})", USAGE)
 
 
 def body_size_arg(text: str):

@@ -9,8 +9,8 @@ import numpy as np
 from .. import JOINT_NAMES, build_model, get_movement
 from ..analysis.plots import _pyplot
 from ..bag import open_bag
-from ..bag.check import LATE_MAX_NS
-from ..bag.decode import read_recording
+from ..offline.check import LATE_MAX_NS
+from ..offline.recording import read_recording
 from ..reference import load_reference
 
 SHOW = ("pro_sup", "elbow_flexion", "wrist_flexion", "index_mcp_flexion")

@@ -24,12 +24,12 @@ from pathlib import Path
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
-from ..bag import BagError, BagWriter, TopicQos
-from ..bag.jointstream import tidy
-from ..bag.opensim import CoordinateMap, MotionError, map_motion, read_motion
+from ..bag import BagWriter, TopicQos
+from ..codec.jointstate import tidy
 from ..description import JOINT_NAMES
 from ..exit_codes import OK, USAGE
-from .common import die
+from ..formats.opensim import CoordinateMap, map_motion, read_motion
+from .common import die, guarded
 
 PROG = "mot_to_bag"
 METADATA = "forearm_dynamics/mot_to_bag"
@@ -96,14 +96,7 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    try:
-        return run(args)
-    except (MotionError, BagError) as exc:
-        return die(f"{PROG}: error: {exc}", USAGE)
-    except (OSError, ValueError, KeyError) as exc:
-        return die(f"{PROG}: error: {exc}", USAGE)
-    except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback
-        return die(f"{PROG}: error: {args.motion}: cannot convert ({type(exc).__name__}: {exc})", USAGE)
+    return guarded(PROG, run, args, f"{args.motion}: cannot convert")
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ from .. import get_movement
 from ..analysis.comparison import Trials, reference_filtered
 from ..analysis.elbow import elbow_analysis
 from ..analysis.errors import global_range
-from ..analysis.filtering import analysis_config, lowpass
 from ..analysis.placement import HEADLINE, OBJECTIVE, VARIANTS, FitCache, Scorer, fit
 from ..analysis.report import errors_json, tables_markdown, update_readme, write_json
 from ..analysis.robustness import robustness
@@ -30,6 +29,7 @@ from ..analysis.validation import across_sizes, held_out
 from ..anthropometry import resolve_body_size
 from ..builders import forearm_cylinder
 from ..description import load_description
+from ..filtering import analysis_config, lowpass
 from ..reference import load_reference
 from .common import die
 

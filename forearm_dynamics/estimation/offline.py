@@ -9,7 +9,7 @@ Two methods, for offline work on a recording (bag_torques, check_bag without mar
   sample by sample (same result, slower).
 - `zero_phase`: the offline practice of biomechanics (and the paper): positions resampled
   to a uniform grid (median sample period), low-passed forward-backward (Butterworth,
-  analysis.filtering, 6 Hz by default), velocity and acceleration as central differences
+  filtering.py, 6 Hz by default), velocity and acceleration as central differences
   of the filtered signal, brought back to the sample times. No lag; not causal.
 
 Segments: a stamp step larger than `max_gap_ns` (or backwards) starts a new segment, as
@@ -23,7 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..analysis.filtering import lowpass
+from ..filtering import lowpass
 from . import make_estimator
 
 

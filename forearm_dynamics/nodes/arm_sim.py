@@ -31,7 +31,7 @@ above max_torque. In lockstep mode a refused command still advances its step.
 The model comes from the torque node's model parameters (one definition:
 torque_config.MODEL_SPECS), read-only here; the simulation from simulation/ (RK4 or
 semi-implicit Euler, damping, joint limits). The node states both on `~/config` (JSON,
-latched): the model part as torque_node's (bag.model_config) plus the solver, damping and
+latched): the model part as torque_node's (model_config.py) plus the solver, damping and
 limit gains per joint, the initial posture, mode and topics.
 """
 
@@ -51,9 +51,9 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..bag.jointstate_cdr import Layout, NotMine, OutputTemplate, verified_layout
-from ..bag.model_config import model_config
+from ..codec.jointstate_cdr import Layout, NotMine, OutputTemplate, verified_layout
 from ..exit_codes import OK
+from ..model_config import model_config
 from ..simulation import ArmSimulator
 from ..version import package_version
 from .arm_sim_settings import SPECS, ArmSimSettings

@@ -30,11 +30,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from ..bag.model_config import model_from_config
+from ..codec.jointstate import TorqueReader
 from ..dynamics import ArmModel
+from ..model_config import model_from_config
 from ..viz import ArmScene, MarkerMaker, TorqueColours
 from ..viz.marker_cdr import marker_array_cdr
-from .arm_markers import TorqueReader
 from .arm_viz_settings import LIVE_VIEW, MODEL_NAMES, SPECS, ArmVizSettings, own_model, view_values
 from .common import latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, init_node

@@ -46,9 +46,10 @@ from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 
-from ..bag import BagError, open_bag
+from ..bag import open_bag
 from ..bag.playback import TIMINGS, Playlist, bag_file, load_playlist, write_stamp
 from ..bag.schemas import message_class
+from ..errors import BagError, UsageError
 from ..exit_codes import USAGE
 from .common import run
 from .params import ParameterError, Params, Spec, init_node
@@ -148,7 +149,9 @@ class BagPlayer(RealtimeNode, Node):
             self.playlist: Playlist = load_playlist(open_bag(bag_path), topics, timing, start_offset)
             classes = [message_class(t.channel.schema_name) for t in self.playlist.topics]
         except BagError as exc:
-            raise ParameterError("bag" if exc.kind not in ("usage",) else "start_offset", str(exc)) from None
+            raise ParameterError("bag", str(exc)) from None
+        except UsageError as exc:
+            raise ParameterError("start_offset", str(exc)) from None
         _check_decodes(self.playlist, classes)
         for w in self.playlist.warnings:
             self.get_logger().warning(w)

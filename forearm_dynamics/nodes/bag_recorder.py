@@ -41,16 +41,10 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..bag import (
-    CHUNK_SIZE,
-    FLUSH_PERIOD_S,
-    BagError,
-    BagWriteError,
-    BagWriter,
-    TopicQos,
-)
+from ..bag import CHUNK_SIZE, FLUSH_PERIOD_S, BagWriter, TopicQos
 from ..bag.schemas import message_class, type_name_of
 from ..bag.writer import COMPRESSION
+from ..errors import BagError, BagWriteError
 from ..exit_codes import DATA, OK
 from .common import CONFIG_TOPIC, latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, Spec, init_node

@@ -1,7 +1,7 @@
 """What a stream node does with input bytes of each shape, found once per shape.
 
 A JointState's shape (frame_id, names, field counts, hence every offset) is parsed by the
-hand-written CDR parser (bag/jointstate_cdr.py) and checked against rclpy's deserialiser
+hand-written CDR parser (codec/jointstate_cdr.py) and checked against rclpy's deserialiser
 once; after that a message of that shape is read through numpy views at fixed offsets.
 Shapes the parser cannot vouch for go the generic way (rclpy's deserialiser), and a shape
 whose names or counts are wrong carries its Rejection, so every such message is refused
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bag.jointstate_cdr import Layout, NotMine, aligned_buffer, parse_layout, verify_layout
+from ..codec.jointstate_cdr import Layout, NotMine, aligned_buffer, parse_layout, verify_layout
 from . import validation as v
 
 PLAN_CACHE = 16  # shapes (like NameMatcher's name lists); oldest dropped first

@@ -1,23 +1,26 @@
 """The torque node's worker thread: builds requested models and publishes configs off the
-executor thread, so a live parameter change never stalls the 1 kHz callback for a build."""
+executor thread, so a live parameter change never stalls the 1 kHz callback for a build.
+
+It is given two callables, not the node: `build(request)` and `announce(bundle, stamp_ns)`;
+what they do (build a bundle, publish a config message) is the node's business.
+"""
 
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING
+from collections.abc import Callable
 
 from ..realtime import make_normal, set_thread_name
-
-if TYPE_CHECKING:
-    from .torque_config import ModelBundle, ModelRequest
-    from .torque_node import TorqueNode
+from .torque_config import ModelBundle, ModelRequest
 
 
 class ModelBuilder:
     """One worker thread that builds requested bundles; the newest request wins."""
 
-    def __init__(self, node: TorqueNode):
-        self._node = node
+    def __init__(self, build: Callable[[ModelRequest], None],
+                 announce: Callable[[ModelBundle, int], None]):
+        self._build = build
+        self._publish = announce
         self._cv = threading.Condition()
         self._request: ModelRequest | None = None
         self._announcements: list[tuple[ModelBundle, int]] = []
@@ -58,7 +61,7 @@ class ModelBuilder:
                 announcements, self._announcements = self._announcements, []
                 request, self._request = self._request, None
             for bundle, stamp_ns in announcements:
-                self._node._publish_config(bundle, stamp_ns)
+                self._publish(bundle, stamp_ns)
             if request is None:
                 continue
             # Measured (benchmarks/torque_node_rate.py, 2 loaded cores): a build (~2-5 ms)
@@ -66,4 +69,4 @@ class ModelBuilder:
             # sys.setswitchinterval(1e-5 or 1e-3) during the build only made it slower
             # (request -> first new sample ~8 ms instead of ~4 ms), and this thread at nice
             # 19 was worse still (it holds the GIL while descheduled). So: plain.
-            self._node.build(request)
+            self._build(request)

@@ -44,6 +44,7 @@ from rclpy.exceptions import (
 )
 from rclpy.node import Node
 
+from ..errors import UsageError
 from ..paths import config_file
 
 #: Keyword arguments every node passes to rclpy's Node (see the module docstring).
@@ -71,7 +72,7 @@ SYSTEM_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"}
 _TYPE_WORDS = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
 
 
-class ParameterError(ValueError):
+class ParameterError(UsageError, ValueError):
     """A parameter value the node refuses to start with (the node exits with code 2)."""
 
     def __init__(self, name: str, why: str):

@@ -13,7 +13,7 @@ import numpy as np
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
-from ..bag.jointstate_cdr import STAMP, NotMine, aligned_buffer, verified_layout
+from ..codec.jointstate_cdr import STAMP, NotMine, aligned_buffer, verified_layout
 
 CACHE = 8  # templates, one per frame_id (as the torque output's)
 

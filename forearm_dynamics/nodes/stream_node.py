@@ -48,7 +48,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from ..bag.jointstate_cdr import STAMP, OutputTemplate
+from ..codec.jointstate_cdr import STAMP, OutputTemplate
 from ..deadlines import REASONS_INPUT, REASONS_TIMER, Deadlines
 from ..gcwatch import GcWatch
 from . import validation as v

@@ -20,7 +20,6 @@ import pinocchio as pin
 import yaml
 
 from ..anthropometry import DIMENSIONS, resolve_body_size
-from ..bag.model_config import model_config
 from ..builders import MODEL_KINDS
 from ..dynamics import ArmModel, build_model
 from ..estimation import (
@@ -30,6 +29,7 @@ from ..estimation import (
     all_settings,
     make_estimator,
 )
+from ..model_config import model_config
 from ..paths import config_file
 from ..payload import make_payload
 from ..uncertainty import NoCovariance, TorqueStd

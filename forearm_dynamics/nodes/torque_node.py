@@ -51,6 +51,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from ..model_config import config_message
 from ..version import package_version
 from . import validation as v
 from .common import latched_qos, main_for, stream_qos
@@ -97,7 +98,8 @@ class TorqueNode(JointStreamNode):
         self._version = package_version()
         self._announce: ModelBundle | None = None  # installed, not yet stated with its stamp
         self._publish_config(self._bundle, 0)
-        self._worker = ModelBuilder(self)  # a helper thread: stays at normal priority
+        # a helper thread: stays at normal priority
+        self._worker = ModelBuilder(self.build, self._publish_config)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         if self.output_rate_hz > 0:
@@ -344,24 +346,24 @@ class TorqueNode(JointStreamNode):
     def config_message(self, b: ModelBundle, applies_from: int | None) -> dict:
         dt = (self._last_dt_ns or 1_000_000) * 1e-9
         s = self.settings
-        return {
-            "config_id": b.config_id,
-            "applies_from_stamp_ns": applies_from,
-            "node": self.get_fully_qualified_name(),
-            "version": self._version,
-            **b.model_config,
-            "estimator": b.estimator.describe(dt, self._velocity_given),
-            "input_topic": self.sub.topic_name if hasattr(self, "sub") else s.input_topic,
-            "output_topic": self.pub.topic_name if hasattr(self, "pub") else s.output_topic,
-            "max_stamp_gap": s.max_stamp_gap,
-            "output_rate_hz": self.output_rate_hz,
-            "input_timeout": self.input_timeout_ns / 1e9,
-            "build_ms": round(b.build_ms, 3),
-            "deadline_ms": self.deadlines.deadline_ms if hasattr(self, "deadlines") else None,
-            "realtime": (self.realtime_state.describe() if self.realtime_state is not None
-                         else {"policy": "not applied yet"}),
-            "std": self._std_config(b),
-        }
+        return config_message(
+            b.model_config,
+            config_id=b.config_id,
+            applies_from_stamp_ns=applies_from,
+            node=self.get_fully_qualified_name(),
+            version=self._version,
+            estimator=b.estimator.describe(dt, self._velocity_given),
+            input_topic=self.sub.topic_name if hasattr(self, "sub") else s.input_topic,
+            output_topic=self.pub.topic_name if hasattr(self, "pub") else s.output_topic,
+            max_stamp_gap=s.max_stamp_gap,
+            output_rate_hz=self.output_rate_hz,
+            input_timeout=self.input_timeout_ns / 1e9,
+            build_ms=round(b.build_ms, 3),
+            deadline_ms=self.deadlines.deadline_ms if hasattr(self, "deadlines") else None,
+            realtime=(self.realtime_state.describe() if self.realtime_state is not None
+                      else {"policy": "not applied yet"}),
+            std=self._std_config(b),
+        )
 
     def _std_config(self, b: ModelBundle) -> dict:
         if self._std_topic is None:

@@ -44,7 +44,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ..anthropometry import resolve_body_size
-from ..bag.jointstate_cdr import OutputTemplate
+from ..codec.jointstate_cdr import OutputTemplate
 from ..description import JOINT_NAMES
 from ..exit_codes import OK
 from ..movements import Movement, get_movement, movement_library

@@ -1,1 +1,2 @@
-"""Offline evaluation of recorded runs (check, score, regression, delivery, the HTML report)."""
+"""Offline evaluation of recordings: check_bag's checks, scores, regression and delivery
+figures, the HTML report, and bag_torques' batch torques."""

@@ -27,8 +27,8 @@ from plotly.io import to_html
 from plotly.offline import get_plotlyjs
 from plotly.subplots import make_subplots
 
-from ..analysis.filtering import lowpass
 from ..description import DOF_GROUPS
+from ..filtering import lowpass
 from ..movements import get_movement
 
 MAX_POINTS = 250
@@ -185,7 +185,7 @@ def _delivery(d, rec, notes: list[str]) -> list[str]:
 
 
 def render(report, rec, ref, bag_info, code: int, latency_lines: list[str]) -> str:
-    """The whole page (str). report: bag.check.CheckReport; rec: the bag's Recording."""
+    """The whole page (str). report: offline.check.CheckReport; rec: the bag's Recording."""
     arm = report.model.arm
     parts = _head(bag_info, report.failures, report.warnings, code)
     parts.append(f"<p>{bag_info.message_count} messages, {len(report.movements)} movements; model "
@@ -247,7 +247,7 @@ def segment_figure(report) -> go.Figure:
 
 
 def render_segment(report, rec, bag_info, code: int) -> str:
-    """The page of a recording without markers (report: bag.score.ScoreReport)."""
+    """The page of a recording without markers (report: offline.score.ScoreReport)."""
     names = report.joint_names
     parts = _head(bag_info, report.failures, report.warnings, code)
     parts.append(f"<p>{bag_info.message_count} messages, no movement markers: scored as one "

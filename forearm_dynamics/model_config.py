@@ -1,8 +1,10 @@
-"""Rebuild the model a torque node ran, from its config message (`<node>/config`, JSON).
+"""The config message (`<node>/config`, JSON): written and read by this one module.
 
-The reader is strict: the message must have exactly the keys torque_node writes
-(nodes/torque_config.py), each of the right kind; anything else is a ValueError naming the
-key, never a silent guess. The node republishes its config periodically and on every live
+Every writer (torque_node, bag_torques) builds its message with `config_message`, which
+refuses a key the reader does not know; the reader (`model_from_config`, check_bag) is
+strict: the message must have the model keys, each of the right kind, and nothing but the
+keys listed here; anything else is a ConfigMessageError naming the key, never a silent
+guess. The node republishes its config periodically and on every live
 change; each message carries `config_id` and `applies_from_stamp_ns` (the header stamp of
 the first output computed with it; 0 = from the start; null = built, not applied yet).
 `config_in_force` picks, for one sample stamp, the config that computed it.
@@ -18,19 +20,37 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..anthropometry import BodySize, resolve_body_size
-from ..dynamics import ArmModel, build_model
+from .anthropometry import BodySize, resolve_body_size
+from .dynamics import ArmModel, build_model
+from .errors import ConfigMessageError
 
 CONFIG_SCHEMA = 2
 DEFAULT_KIND = "segmented"
 DEFAULT_SIZE = 50
 
-#: The model part (required) and the node part (optional: a bag writer may state only the
-#: model) of a config message.
+#: The model part (required, written by `model_config`) of a config message.
 MODEL_KEYS = frozenset({"schema", "model", "body_size", "side", "payload", "placement", "joint_names"})
-NODE_KEYS = frozenset({"config_id", "applies_from_stamp_ns", "node", "version", "estimator",
-                       "input_topic", "output_topic", "max_stamp_gap", "output_rate_hz",
-                       "input_timeout", "build_ms", "deadline_ms", "realtime", "std"})
+#: The node part (optional: a bag writer may state only the model): who computed the torques
+#: and how. Each key a writer may add, with what it holds.
+NODE_FIELDS = {
+    "config_id": "integer, 1 at start-up, +1 per live change built",
+    "applies_from_stamp_ns": "header stamp of the first output computed with this config; "
+                             "0 = from the start; null = built, not applied yet",
+    "node": "the writer: the node's fully qualified name, or the offline tool's name",
+    "version": "forearm_dynamics version of the writer",
+    "estimator": "the state estimator: method, settings, lag per estimate, assumed noise",
+    "input_topic": "the JointState topic read",
+    "output_topic": "the torque topic written",
+    "max_stamp_gap": "s: a larger stamp step resets the estimator",
+    "output_rate_hz": "0 = one output per input; > 0 = a timer's rate",
+    "input_timeout": "s: with output_rate_hz > 0, silence after this long without input",
+    "build_ms": "how long building this model took",
+    "source_bag": "offline runs: the bag the inputs were read from",
+    "deadline_ms": "the node's per-sample deadline (0 = none); misses are counted in /diagnostics",
+    "realtime": "the scheduling the node asked for and got (policy, priority, memory lock, CPUs)",
+    "std": "the torque σ (joint_torques_std): its topic and parts, or why none is published",
+}
+NODE_KEYS = frozenset(NODE_FIELDS)
 PLACEMENT_KEYS = frozenset({"name", "split", "split_rule", "axis_offset_proximal", "axis_offset_distal",
                             "cylinder"})
 PAYLOAD_KEYS = frozenset({"mass", "com", "inertia"})
@@ -49,7 +69,7 @@ class ModelChoice:
 
 def _require(cond: bool, what: str) -> None:
     if not cond:
-        raise ValueError(f"config message: {what}")
+        raise ConfigMessageError(f"config message: {what}")
 
 
 def _keys(d, allowed: frozenset, required: frozenset, where: str) -> None:
@@ -71,7 +91,7 @@ def _body_size(d) -> tuple[BodySize, int | None]:
     try:
         size = BodySize(**{k: (str(v) if k == "label" else float(v)) for k, v in d.items()})
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"config message: body_size: {exc}") from None
+        raise ConfigMessageError(f"config message: body_size: {exc}") from None
     pct = _percentile_of(size.label)
     if pct is not None:
         try:
@@ -124,7 +144,8 @@ def _same_placement(built: dict | None, stated: dict | None) -> bool:
 
 
 def model_from_config(cfg: dict | None) -> ModelChoice:
-    """The model of the config (ValueError naming the problem if it cannot be read or built)."""
+    """The model of the config (ConfigMessageError naming the problem if it cannot be read;
+    the core's ValueError if it cannot be built)."""
     if cfg is None:
         return ModelChoice(build_model(DEFAULT_KIND, DEFAULT_SIZE), DEFAULT_SIZE, "default",
                            [(f"no torque_node/config in the bag: assuming the {DEFAULT_KIND} "
@@ -171,7 +192,7 @@ def _placement(arm: ArmModel) -> dict | None:
 
 def model_config(arm: ArmModel) -> dict:
     """The model part of the config message: exactly what was built (model_from_config
-    reads it back, strictly). Written here beside its reader so the two cannot drift.."""
+    reads it back, strictly). Written here beside its reader so the two cannot drift."""
     payload = None
     if arm.payload is not None:
         payload = arm.payload.as_dict()
@@ -187,3 +208,15 @@ def model_config(arm: ArmModel) -> dict:
     if any(isinstance(x, float) and not math.isfinite(x) for x in out["body_size"].values()):
         raise ValueError("body size scale factors are not finite")
     return out
+
+
+def config_message(model_part: dict, **node) -> dict:
+    """The whole message: the model part (`model_config`) and the writer's node part.
+
+    A node key the reader would refuse is a programming error (KeyError) here, at the
+    writer, instead of a bag that check_bag cannot read.
+    """
+    unknown = sorted(set(node) - NODE_KEYS)
+    if unknown:
+        raise KeyError(f"config message: {unknown} not among the node keys {sorted(NODE_KEYS)}")
+    return {**model_part, **node}

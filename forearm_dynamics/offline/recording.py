@@ -1,8 +1,8 @@
 """The pipeline's topics out of a bag, as numpy arrays (what check_bag analyses).
 
-JointState payloads are deserialised with rclpy (the same CDR code the nodes use);
-columns are put in the requested joint order by name, so a publisher's own order does
-not matter. One pass over the bag reads every topic.
+JointStates through the one reader (codec/jointstate.py), columns in the requested joint
+order by name; the movement markers, the config messages and the load average from
+/diagnostics beside them. One pass over the bag reads every topic.
 """
 
 from __future__ import annotations
@@ -10,13 +10,12 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from .reader import Bag
+from ..bag.reader import Bag
+from ..codec.jointstate import JointSeries, JointStateReader
 
 JOINT_STATES = "joint_states"
 JOINT_TORQUES = "joint_torques"
@@ -24,24 +23,6 @@ MOVEMENT = "movement"
 CONFIG = "torque_node/config"
 DIAGNOSTICS = "/diagnostics"
 LOAD_KEY = "load_average_1min"  # put in /diagnostics by the torque node
-
-
-@dataclass
-class JointSeries:
-    """One JointState topic: header stamps, receive (log) times, arrays in joint order.
-
-    Arrays are (N, J) float64 with NaN where a joint (or the whole field) was missing;
-    None when the field was not asked for.
-    """
-
-    stamp_ns: np.ndarray  # (N,) int64
-    log_ns: np.ndarray  # (N,) int64
-    position: np.ndarray | None = None
-    velocity: np.ndarray | None = None
-    effort: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return len(self.stamp_ns)
 
 
 @dataclass
@@ -64,46 +45,6 @@ class Recording:
     markers: list[Marker]
     warnings: list[str] = field(default_factory=list)
     load_average: list[float] = field(default_factory=list)  # from /diagnostics, if recorded
-
-
-class _Collector:
-    """Deserialises JointStates; keeps the asked-for fields, columns matched by joint name."""
-
-    def __init__(self, joint_names: tuple[str, ...], fields: tuple[str, ...]):
-        self.joint_names = joint_names
-        self.fields = fields
-        self.stamps: list[int] = []
-        self.logs: list[int] = []
-        self.rows: dict[str, list[np.ndarray]] = {f: [] for f in fields}
-        self._maps: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
-        self.incomplete = dict.fromkeys(fields, 0)  # messages whose field length != names
-
-    def add(self, data: bytes, log_ns: int) -> None:
-        msg = deserialize_message(data, JointState)
-        st = msg.header.stamp
-        self.stamps.append(st.sec * 1_000_000_000 + st.nanosec)
-        self.logs.append(log_ns)
-        if not self.fields:
-            return
-        names = tuple(msg.name)
-        mapping = self._maps.get(names)
-        if mapping is None:
-            pos = {n: i for i, n in enumerate(names)}
-            idx = np.array([pos.get(n, -1) for n in self.joint_names])
-            mapping = self._maps[names] = (idx, idx >= 0)
-        idx, ok = mapping
-        for f in self.fields:
-            values = getattr(msg, f)
-            row = np.full(len(self.joint_names), np.nan)
-            if len(values) == len(names):
-                row[ok] = np.frombuffer(values, dtype=np.float64)[idx[ok]]
-            else:
-                self.incomplete[f] += 1
-            self.rows[f].append(row)
-
-    def series(self) -> JointSeries:
-        arrays = {f: np.array(r).reshape(len(r), len(self.joint_names)) for f, r in self.rows.items()}
-        return JointSeries(np.array(self.stamps, np.int64), np.array(self.logs, np.int64), **arrays)
 
 
 def _marker(text: str) -> Marker:
@@ -143,8 +84,9 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
         chans[DIAGNOSTICS] = diag
     load: list[float] = []
     ids = {c.id: key for key, c in chans.items() if c is not None}
-    states = _Collector(joint_names, ("position", "velocity"))
-    torques = _Collector(joint_names, ("effort",))
+    where = f"{bag.path}: "
+    states = JointStateReader(joint_names, False, where + JOINT_STATES)
+    torques = JointStateReader(joint_names, True, where + JOINT_TORQUES)
     markers: list[Marker] = []
     warnings: list[str] = []
     for ch, msg in bag.messages([c.topic for c in chans.values() if c is not None]):
@@ -161,13 +103,14 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
                 warnings.append(f"unreadable {key} message ignored ({exc}): {text[:80]!r}")
         elif key == DIAGNOSTICS:
             load += _load_average(msg.data)
-    if torques.incomplete["effort"]:
-        warnings.append(f"{torques.incomplete['effort']} joint_torques messages without one effort "
+    joint_torques = torques.series(JOINT_TORQUES) if chans[JOINT_TORQUES] is not None else None
+    if joint_torques is not None and joint_torques.short["effort"]:
+        warnings.append(f"{joint_torques.short['effort']} joint_torques messages without one effort "
                         "per name")
     unique = {(m.id, m.t0_ns): m for m in markers}
     return Recording(
-        joint_states=states.series() if chans[JOINT_STATES] is not None else None,
-        joint_torques=torques.series() if chans[JOINT_TORQUES] is not None else None,
+        joint_states=states.series(JOINT_STATES) if chans[JOINT_STATES] is not None else None,
+        joint_torques=joint_torques,
         markers=sorted(unique.values(), key=lambda m: m.t0_ns),
         warnings=warnings,
         load_average=load,

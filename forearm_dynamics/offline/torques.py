@@ -27,17 +27,20 @@ import numpy as np
 from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
+from .. import model_config
+from ..bag.reader import open_bag
+from ..bag.recover import copy_layout, custom_data
+from ..bag.rosbag2_meta import TopicQos
+from ..bag.writer import BagWriter
+from ..codec.jointstate import JointSeries, read_joint_series
+from ..codec.jointstate_cdr import OutputTemplate
 from ..dynamics import ArmModel
+from ..errors import ForeignBag, OutputExists, UsageError
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, segments, zero_phase
-from .errors import BagError
-from .jointstate_cdr import OutputTemplate
-from .jointstream import JointStream, read_joint_stream
-from .reader import open_bag
-from .recover import copy_layout, custom_data
-from .rosbag2_meta import TopicQos
-from .writer import BagWriter
+from ..filtering import analysis_config
+from ..version import package_version
 
 #: The node's estimators, then the offline zero-phase one.
 ESTIMATORS = (*NODE_ESTIMATORS, "zero_phase")
@@ -77,15 +80,15 @@ def stamp_rules(stamps_ns: np.ndarray, max_gap_ns: int) -> np.ndarray:
     return keep
 
 
-def compute(stream: JointStream, arm: ArmModel, estimator: str = DEFAULT_ESTIMATOR,
+def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMATOR,
             settings: dict | None = None, max_gap_s: float = 0.1,
             cutoff_hz: float | None = None) -> OfflineResult:
     """Torques of every kept sample; BagError when a joint of the model is never given."""
     if estimator not in ESTIMATORS:
-        raise BagError("usage", f"estimator must be one of {', '.join(ESTIMATORS)}, got {estimator!r}")
+        raise UsageError(f"estimator must be one of {', '.join(ESTIMATORS)}, got {estimator!r}")
     missing = [n for j, n in enumerate(arm.joint_names) if not np.isfinite(stream.position[:, j]).any()]
     if missing:
-        raise BagError("foreign", f"{stream.topic} has no position for {', '.join(missing[:4])}"
+        raise ForeignBag(f"{stream.topic} has no position for {', '.join(missing[:4])}"
                        f"{' ...' if len(missing) > 4 else ''}: not this model's joints")
     gap = round(max_gap_s * 1e9)
     keep = stamp_rules(stream.stamp_ns, gap)
@@ -124,20 +127,16 @@ def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Pa
                    input_topic: str, output_topic: str, max_gap_s: float,
                    cutoff_hz: float | None) -> dict:
     """What the torque node states on torque_node/config, for an offline run."""
-    from ..version import package_version
-    from .model_config import model_config
-
     if estimator == "zero_phase":
-        from ..analysis.filtering import analysis_config
-
         desc = {"method": "zero_phase", "settings": {"cutoff_hz": float(
             cutoff_hz if cutoff_hz is not None else analysis_config()["filter"]["cutoff_hz"])},
             "lag_s": {"q": 0.0, "qd": 0.0, "qdd": 0.0}, "offline": True}
     else:
         desc = make_estimator(estimator, arm.nv, settings or {}).describe(1e-3)
-    return {"node": "bag_torques", "version": package_version(), **model_config(arm),
-            "estimator": desc, "input_topic": input_topic, "output_topic": output_topic,
-            "max_stamp_gap": max_gap_s, "source_bag": str(src)}
+    return model_config.config_message(
+        model_config.model_config(arm), node="bag_torques", version=package_version(),
+        estimator=desc, input_topic=input_topic, output_topic=output_topic,
+        max_stamp_gap=max_gap_s, source_bag=str(src))
 
 
 def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: dict,
@@ -148,7 +147,7 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
     info = bag.info
     for topic in (output_topic, config_topic):
         if (ch := info.find_topic(topic)) is not None:
-            raise BagError("exists", f"{src} already has {ch.topic}; choose another with --topic "
+            raise OutputExists(f"{src} already has {ch.topic}; choose another with --topic "
                            f"(e.g. {output_topic}_offline)")
     writer = BagWriter(dst, overwrite=overwrite, custom_data=custom_data(info.metadata))
     try:
@@ -198,9 +197,9 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT
                 cutoff_hz: float | None = None, overwrite: bool = False) -> tuple[OfflineResult, dict]:
     src, dst = Path(src), Path(dst)
     if dst.exists() and src.resolve() == dst.resolve():
-        raise BagError("exists", f"{dst}: the output must be another file than the input")
+        raise OutputExists(f"{dst}: the output must be another file than the input")
     bag = open_bag(src)
-    stream = read_joint_stream(bag, input_topic, arm.joint_names)
+    stream = read_joint_series(bag, input_topic, arm.joint_names)
     res = compute(stream, arm, estimator, settings, max_gap_s, cutoff_hz)
     if not bag.info.complete:
         res.warnings.insert(0, f"{src} is truncated ({bag.info.problem}); using the "

@@ -2,7 +2,7 @@
 
 A subject's session (or a replay of real data) has no analytic trajectory to compare
 with, so the reference is the offline practice of biomechanics: the recorded joint_states
-positions filtered at 6 Hz zero-phase (analysis.filtering, config/analysis.yaml), velocity
+positions filtered at 6 Hz zero-phase (filtering.py, config/analysis.yaml), velocity
 and acceleration as derivatives of the filtered signal (estimation/offline.zero_phase),
 inverse dynamics with the model the bag's config names. The recorded joint_torques are
 compared with it at the same stamps:
@@ -26,11 +26,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..analysis.errors import rmse
-from ..analysis.filtering import analysis_config
 from ..estimation.offline import zero_phase
-from .decode import Recording
+from ..filtering import analysis_config
+from ..model_config import ModelChoice
 from .delivery import Delivery, delivery
-from .model_config import ModelChoice
+from .recording import Recording
 from .thresholds import Thresholds
 
 MAX_LAG_S = 0.2

@@ -1,5 +1,5 @@
 """check_bag's pass/fail limits (config/check.yaml, or a file given with --thresholds): one
-place, read by both scorers (bag/check.py with markers, bag/score.py without)."""
+place, read by both scorers (offline/check.py with markers, offline/score.py without)."""
 
 from __future__ import annotations
 

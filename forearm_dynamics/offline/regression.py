@@ -15,8 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import BagError
-from .reader import Bag, open_bag
+from ..bag.reader import Bag, open_bag
+from ..codec.jointstate import read_joint_series
+from ..errors import UsageError
 
 TOPIC = "joint_torques"
 
@@ -47,43 +48,13 @@ def _efforts(bag: Bag, names: tuple[str, ...] | None = None
              ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """(stamps (N,), effort (N, J), names): columns by joint name; `names` defaults to the
     first message's order (the node's model order). NaN where a joint has no effort."""
-    from rclpy.serialization import deserialize_message
-    from sensor_msgs.msg import JointState
-
-    ch = bag.info.find_topic(TOPIC)
-    if ch is None:
-        raise BagError("foreign", f"{bag.path}: no {TOPIC} topic (topics: "
-                       f"{', '.join(sorted(bag.info.topic_counts())) or 'none'})")
-    stamps, rows = [], []
-    idx_cache: dict[tuple[str, ...], np.ndarray] = {}
-    for k, (_ch, msg) in enumerate(bag.messages([ch.topic]), 1):
-        try:
-            m = deserialize_message(bytes(msg.data), JointState)
-        except Exception as exc:  # noqa: BLE001 - rclpy raises several types
-            raise BagError("schema", f"{bag.path}: {ch.topic} message {k} does not decode "
-                           f"({type(exc).__name__})") from None
-        key = tuple(m.name)
-        if names is None:
-            names = key
-        idx = idx_cache.get(key)
-        if idx is None:
-            pos = {n: i for i, n in enumerate(key)}
-            idx = idx_cache[key] = np.array([pos.get(n, -1) for n in names], dtype=np.int64)
-        row = np.full(len(names), np.nan)
-        eff = np.asarray(m.effort, float)
-        if len(eff) == len(key):
-            ok = idx >= 0
-            row[ok] = eff[idx[ok]]
-        rows.append(row)
-        stamps.append(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
-    if not rows:
-        raise BagError("no_data", f"{bag.path}: {ch.topic} holds no message")
-    return np.array(stamps, np.int64), np.array(rows), names
+    s = read_joint_series(bag, TOPIC, names, effort=True)
+    return s.stamp_ns, s.effort, s.joint_names
 
 
 def compare(new_path, baseline_path, tolerance: float = 1e-6) -> RegressionReport:
     if not (tolerance >= 0 and math.isfinite(tolerance)):
-        raise BagError("usage", f"--tolerance must be a finite number >= 0, got {tolerance}")
+        raise UsageError(f"--tolerance must be a finite number >= 0, got {tolerance}")
     new_bag, old_bag = open_bag(new_path), open_bag(baseline_path)
     a_s, a, names = _efforts(new_bag)
     b_s, b, _ = _efforts(old_bag, names)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .decode import JointSeries
+from ..codec.jointstate import JointSeries
 
 
 @dataclass

@@ -27,11 +27,8 @@ import numpy as np
 import yaml
 
 from ..description import JOINT_NAMES
+from ..errors import MotionError
 from ..paths import config_file
-
-
-class MotionError(ValueError):
-    """A motion/states file that cannot be used; str() is one line."""
 
 
 @dataclass

@@ -39,13 +39,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..analysis.errors import rmse
-from ..analysis.filtering import analysis_config, lowpass
+from ..codec.jointstate import JointSeries
 from ..description import DOF_GROUPS
+from ..filtering import analysis_config, lowpass
+from ..model_config import ModelChoice
 from ..movements import get_movement
 from ..reference import ReferenceTorques
-from .decode import JointSeries, Marker, Recording
 from .delivery import Delivery, MachineLoad, delivery
-from .model_config import ModelChoice
+from .recording import Marker, Recording
 from .thresholds import Thresholds
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import yaml
 from scipy.signal import butter, sosfiltfilt
 
-from ..paths import config_file
+from .paths import config_file
 
 
 @lru_cache(maxsize=1)

@@ -1,0 +1,1 @@
+"""Text formats of other tools: OpenSim motion and storage tables (.mot/.sto)."""
