@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup browser test demo lint bench bench-estimation bench-rate soak reference reproduce clean
+.PHONY: setup browser test demo demo-closed-loop lint bench bench-estimation bench-rate soak reference reproduce clean
 
 setup: $(VENV)/.installed browser
 
@@ -30,6 +30,13 @@ test: setup
 
 demo: setup
 	ROS_DOMAIN_ID=73 $(VENV)/bin/demo --out demo_out
+
+# The virtual arm in closed loop (docs/virtual-arm.md): trajectory_publisher + torque_node +
+# arm_sim + a computed-torque controller; prints the tracking error, draws
+# demo_out/closed_loop/closed_loop.png. CLOSED_LOOP_ARGS="--lockstep" runs it on arm_sim's clock.
+CLOSED_LOOP_ARGS ?=
+demo-closed-loop: setup
+	$(PY) examples/closed_loop.py --movements 1,26,51 --domain 74 --out demo_out/closed_loop --plot $(CLOSED_LOOP_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check .

@@ -8,8 +8,8 @@ Three movements (a pronation, opening the hand, closing the supinated hand while
 the wrist; each after a jump from the previous one's end posture). Bounds: tracking RMS per
 joint over each movement after its 0.5 s hold <= 1e-2 rad on every joint and <= 5e-3 rad
 on the elbow, pro/sup and wrist (measured worst: 1.45e-3 rad, pro_sup of movement 1, at
-load 20 on 2 cores). PD alone (--no-feedforward) misses by 0.18-0.33 rad (real time): the
-bound is on what the feed-forward does.
+load 20 on 2 cores). PD alone (--no-feedforward) misses by 0.74-0.94 rad (real time, load
+11): the bound is on what the feed-forward does.
 """
 
 from __future__ import annotations
