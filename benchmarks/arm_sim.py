@@ -49,7 +49,7 @@ from benchmarks.stats import (
     write_json,
 )
 from forearm_dynamics import JOINT_NAMES
-from forearm_dynamics.bag.jointstate_cdr import STAMP, OutputTemplate
+from forearm_dynamics.codec.jointstate_cdr import STAMP, OutputTemplate
 from forearm_dynamics.processes import Child, Sampler, ros_env
 
 ROOT = Path(__file__).resolve().parent.parent
