@@ -103,7 +103,14 @@ def test_lockstep_one_step_per_command_bit_for_bit(lockstep) -> None:
         s.pub.publish(command(DRIVEN, [0.0] * 3))
         s.peer.spin_for(0.1)
     s.peer.spin_for(0.5)
-    t0 = s.config["t0_ns"]
+    cfg = s.config
+    assert (cfg["model"], cfg["side"], cfg["lockstep"]) == ("segmented", "right", True)
+    assert cfg["rate_hz"] == 1000.0
+    sim_cfg = cfg["simulation"]
+    assert sim_cfg["method"] == "rk4" and sim_cfg["dt"] == 1e-3 and sim_cfg["joint_limits"] is True
+    assert set(sim_cfg["damping"].values()) == {1e-7}  # the documented default
+    assert sim_cfg["limit_stiffness"]["elbow_flexion"] > 1000.0  # passive.py: ~4188 N·m/rad
+    t0 = cfg["t0_ns"]
     k0 = (stamp_ns(s.states[-1]) - t0) // MS  # zero-torque steps taken so far
     assert (stamp_ns(s.states[-1]) - t0) % MS == 0
     n_before, c_before = len(s.states), len(s.clock)
