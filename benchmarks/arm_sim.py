@@ -20,6 +20,10 @@ so every section states the load average and the CPU the rest of the machine use
   multiple of real time (steps/s / rate_hz). Baseline: the same ping-pong with
   null_echo_node (JointState in -> JointState out, nothing computed): the DDS round trip
   through a Python node, the ceiling for any lockstep node; ratio = arm_sim / echo.
+- `core_step` (no ROS): the cost of one ArmSimulator.step (RK4 and semi-implicit Euler,
+  limits and damping on, 50th-percentile segmented model) per call, p50/p99 in us, and as
+  the baseline in the same run one inverse-dynamics call (ArmModel.inverse_dynamics, what
+  torque_node computes per sample): ratio step / ID.
 - `closed_loop`: examples/closed_loop.py on movements 1, 26, 51, in real time and in
   lockstep: tracking RMS per joint per movement (worst joint, elbow, pro_sup, wrist), loop
   latency p50/p99, steps skipped by arm_sim.
@@ -196,6 +200,34 @@ def pingpong(env, logs: Path, seconds: float, node_name: str) -> dict:
             "loadavg": loadavg(), "seconds": seconds}
 
 
+def core_step(n: int = 5000) -> dict:
+    from forearm_dynamics import build_model
+    from forearm_dynamics.simulation import ArmSimulator, SimSettings
+
+    arm = build_model("segmented", 50)
+    tau = arm.gravity_torques(ArmSimulator(arm).q) * 0.9
+    out = {"calls": n, "loadavg_before": loadavg()}
+    perf = time.perf_counter_ns
+    for method in ("rk4", "semi_implicit_euler"):
+        sim = ArmSimulator(arm, SimSettings(method=method))
+        times = np.empty(n, dtype=np.int64)
+        for k in range(n):
+            t = perf()
+            sim.step(tau)
+            times[k] = perf() - t
+        out[method] = percentiles(times, 1e-3)
+    q, qd, qdd = ArmSimulator(arm).q, np.full(20, 0.1), np.full(20, 0.5)
+    times = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        t = perf()
+        arm.inverse_dynamics(q, qd, qdd)
+        times[k] = perf() - t
+    out["baseline_inverse_dynamics"] = percentiles(times, 1e-3)
+    out["rk4_p50_ratio_to_baseline"] = out["rk4"]["p50"] / out["baseline_inverse_dynamics"]["p50"]
+    out["loadavg_after"] = loadavg()
+    return out
+
+
 def closed_loop(domain: int) -> dict:
     out = {}
     for mode in ("realtime", "lockstep"):
@@ -228,7 +260,7 @@ def closed_loop(domain: int) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--parts", default="realtime,lockstep,closed_loop")
+    ap.add_argument("--parts", default="core_step,realtime,lockstep,closed_loop")
     ap.add_argument("--domain", type=int, default=81)
     ap.add_argument("--out", type=Path, default=Path("benchmarks/sim.json"))
     args = ap.parse_args(argv)
@@ -238,6 +270,14 @@ def main(argv=None) -> int:
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     parts = args.parts.split(",")
     new: dict = {}
+    if "core_step" in parts:
+        c = new["core_step"] = core_step()
+        print(f"core step (us, p50/p99): rk4 {c['rk4']['p50']:.1f}/{c['rk4']['p99']:.1f}, "
+              f"semi-implicit Euler {c['semi_implicit_euler']['p50']:.1f}/"
+              f"{c['semi_implicit_euler']['p99']:.1f}; one inverse dynamics "
+              f"{c['baseline_inverse_dynamics']['p50']:.1f}/{c['baseline_inverse_dynamics']['p99']:.1f}"
+              f" (rk4 / ID = {c['rk4_p50_ratio_to_baseline']:.1f}); load {c['loadavg_before']}",
+              flush=True)
     if "realtime" in parts:
         r = new["arm_sim_realtime"] = realtime(env, logs, args.seconds)
         a, b = r["arm_sim"], r["baseline"]
