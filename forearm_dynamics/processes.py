@@ -7,7 +7,8 @@ tests (test/rosproc.py) start every node through `Child`.
   ROS_DOMAIN_ID (never 0, everyone's default); ROS/RMW/Fast DDS variables of the caller are
   not inherited, only what the caller passes explicitly (e.g. a Fast DDS profile).
 - `Child`: output goes to files (a chatty child never blocks on a full pipe); it is stopped
-  by its own PID only: SIGINT, then SIGKILL if it hangs. Never by name.
+  by its own PID only: SIGINT, then SIGKILL if it hangs. Never by name. It starts with
+  SIGINT at its default action even when the caller ignores SIGINT (`popen`).
 - `Sampler`: CPU time and memory of some PIDs from /proc, the machine's busy time and load
   average, in a thread; what the benchmarks report next to their figures.
 - `lease_domain`: a ROS domain id no other process on this machine holds through it (an
@@ -127,6 +128,40 @@ def _new_file(directory: Path, stem: str, suffix: str) -> Path:
     raise FileExistsError(f"no free log name for {stem} in {directory}")
 
 
+def popen(argv: list[str], **kwargs) -> subprocess.Popen:
+    """Popen, the child's SIGINT at its default action (Ctrl-C ends it) even where this
+    process ignores SIGINT, so that stop()'s SIGINT reaches every child.
+
+    A command started with `&` by a non-interactive shell (`make test &` in a script, CI
+    runners, nohup-style wrappers) has SIGINT ignored (POSIX), and an ignored signal stays
+    ignored across fork and exec: every child then ignored stop()'s SIGINT until the kill
+    timeout (a plain Python child for good, a ROS node until rclpy.init installs its own
+    handler), which looked like a slow machine. A signal that is caught is reset to its
+    default action by exec: so while starting the child, this process catches SIGINT (and
+    drops it, as ignoring it would have). Off the main thread (where Python cannot set a
+    handler), a small Python step resets it and execs the command (same PID).
+    """
+    if signal.getsignal(signal.SIGINT) != signal.SIG_IGN:
+        return subprocess.Popen(argv, **kwargs)
+    if threading.current_thread() is not threading.main_thread():
+        return subprocess.Popen([sys.executable, "-c", _EXEC_WITH_DEFAULT_SIGINT, *argv], **kwargs)
+    signal.signal(signal.SIGINT, _drop)
+    try:
+        return subprocess.Popen(argv, **kwargs)
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _drop(_signum, _frame) -> None:
+    """SIGINT while a child starts, in a process that ignores SIGINT: ignored still."""
+
+
+#: Reset SIGINT to its default action, then become argv (same PID): preexec_fn is unsafe
+#: with threads, and this path is for callers off the main thread.
+_EXEC_WITH_DEFAULT_SIGINT = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+                             "os.execvp(sys.argv[1], sys.argv[1:])")
+
+
 class Child:
     """One started process, its output in `log` (stdout and stderr, or `log` and `err_log`).
 
@@ -144,12 +179,12 @@ class Child:
         self.err_log = self.log.with_suffix(".err") if split_stderr else None
         with self.log.open("wb") as out:
             if self.err_log is None:
-                self.proc = subprocess.Popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,
-                                             stdin=subprocess.DEVNULL)
+                self.proc = popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,
+                                   stdin=subprocess.DEVNULL)
             else:
                 with self.err_log.open("wb") as err:
-                    self.proc = subprocess.Popen(argv, env=env, stdout=out, stderr=err,
-                                                 stdin=subprocess.DEVNULL)
+                    self.proc = popen(argv, env=env, stdout=out, stderr=err,
+                                       stdin=subprocess.DEVNULL)
         if cpus:
             # Popen returns once exec succeeded: the child has one thread, and every thread
             # it starts later (rclpy, Fast DDS) inherits this affinity.

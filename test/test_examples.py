@@ -13,6 +13,9 @@ import pytest
 from rosproc import ros_env, start
 
 from forearm_dynamics import JOINT_NAMES, build_model, get_movement
+from forearm_dynamics.processes import popen
+
+pytestmark = pytest.mark.ros
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -73,7 +76,7 @@ def test_client_prints_the_gravity_torques_of_its_posture(torque_node):
 
 def test_listener_follows_a_replayed_movement(torque_node):
     """torque_node <- trajectory_publisher (movement 3), the listener on joint_torques."""
-    listener = subprocess.Popen(
+    listener = popen(  # SIGINT at its default action, whatever this process's (processes.popen)
         [sys.executable, str(EXAMPLES / "torque_listener.py"), "--seconds", "60"], env=ros_env(),
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     pub = None

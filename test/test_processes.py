@@ -14,6 +14,8 @@ import pytest
 
 from forearm_dynamics.processes import Child, Sampler, claim_domain, lease_domain, proc_stat, ros_env
 
+pytestmark = pytest.mark.cli
+
 #: Prints "ready", then sleeps; with "stubborn" it ignores SIGINT.
 SLEEPER = (
     "import signal, sys, time\n"
@@ -123,6 +125,37 @@ def test_start_wait_for_and_stop(tmp_path) -> None:
         b.stop()
     assert not a.running() and proc_stat(a.pid) is None
     assert a.stop() == a.returncode  # stopping twice is harmless
+
+
+#: Ignores SIGINT as a command started with `&` by a non-interactive shell does (POSIX), then
+#: starts a sleeper from its main thread and one from another thread, and stops each by SIGINT.
+IGNORING_PARENT = (
+    "import signal, sys, threading\n"
+    "from pathlib import Path\n"
+    "from forearm_dynamics.processes import Child, ros_env\n"
+    "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+    "d = Path(sys.argv[1])\n"
+    "def run(name):\n"
+    "    c = Child(name, [sys.executable, '-c', sys.argv[2]], ros_env(42, d), d)\n"
+    "    assert c.wait_for('ready', 60), c.text()\n"
+    "    print(name, c.stop(timeout=30), flush=True)\n"
+    "run('main')\n"
+    "t = threading.Thread(target=run, args=('thread',)); t.start(); t.join()\n"
+    "print('parent still ignores:', signal.getsignal(signal.SIGINT) == signal.SIG_IGN)\n"
+)
+
+
+def test_children_of_a_parent_ignoring_sigint_still_stop_on_it(tmp_path) -> None:
+    """`make test &` from a script ran every test with SIGINT ignored, and children inherit
+    an ignored signal: the sleeper of test_start_wait_for_and_stop ignored stop()'s SIGINT
+    and was killed (-9) at the timeout, which looked like a loaded machine. Child starts its
+    process with SIGINT at its default action whatever the parent's; the parent's own
+    disposition is left as it was."""
+    res = subprocess.run([sys.executable, "-c", IGNORING_PARENT, str(tmp_path), SLEEPER],
+                         capture_output=True, text=True, timeout=300, check=False)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines() == [f"main {-signal.SIGINT}", f"thread {-signal.SIGINT}",
+                                       "parent still ignores: True"], res.stdout + res.stderr
 
 
 def test_stubborn_child_is_killed_and_strict_raises(tmp_path) -> None:
