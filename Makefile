@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup browser test demo demo-closed-loop lint bench bench-estimation bench-rate soak reference reproduce clean
+.PHONY: setup browser test test-unit test-hosts demo demo-closed-loop lint bench bench-estimation bench-rate soak reference reproduce clean
 
 setup: $(VENV)/.installed browser
 
@@ -32,6 +32,10 @@ test: setup
 # Installs nftables (apt) when a loss test needs it. docs/two-hosts.md
 test-hosts: setup
 	ROS_DOMAIN_ID=71 $(PY) -m pytest -q -m hosts test
+
+# the fast tier (docs/testing.md): no processes, no DDS; run it on every change
+test-unit: setup
+	$(PY) -m pytest -q -m unit test
 
 demo: setup
 	ROS_DOMAIN_ID=73 $(VENV)/bin/demo --out demo_out

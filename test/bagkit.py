@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 from rclpy.serialization import serialize_message
 from rosproc import _LOG_DIR, BIN, NodeProcess, ros_env
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from support.jointstate import joint_state_bytes
 
-from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.bag import BagWriter, TopicQos
 from forearm_dynamics.processes import lease_domain
 
@@ -31,14 +30,8 @@ T0 = 1_700_000_000_000_000_000
 
 
 def joint_state(stamp_ns: int, q, qd=None, effort=None) -> bytes:
-    m = JointState()
-    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    m.header.frame_id = "humerus"
-    m.name = list(JOINT_NAMES)
-    m.position = [float(x) for x in q]
-    m.velocity = [] if qd is None else [float(x) for x in qd]
-    m.effort = [] if effort is None else [float(x) for x in effort]
-    return serialize_message(m)
+    """A bag's JointState payload (support.jointstate)."""
+    return joint_state_bytes(stamp_ns, q, qd, effort)
 
 
 def smooth_motion(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

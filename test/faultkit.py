@@ -1,5 +1,6 @@
-"""Shared pieces of the fault suite (test_faults_*.py): private DDS domains, process
-bookkeeping, a torque_node harness, a child JointState feeder, CDR stamp peeking.
+"""Shared pieces of the fault suite (test_faults_*.py): private DDS domains, the suite's
+defaults for the shared JointState builder and torque_node harness (test/support/), a child
+JointState feeder, what a bag holds.
 
 Every process is started with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a domain of
 its test's own (102..139: rosproc uses 1..101, test_bag_recorder 140..229), and stopped
@@ -9,19 +10,26 @@ by its own PID only.
 from __future__ import annotations
 
 import signal
-import struct
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import rosproc
-from diagnostic_msgs.msg import DiagnosticArray
+from rosproc import Procs
 from sensor_msgs.msg import JointState
+from support.jointstate import cdr_stamp, stamp_of
+from support.jointstate import joint_state as _joint_state
+from support.torque_harness import Diagnostics
+from support.torque_harness import TorqueHarness as _TorqueHarness
 
 from forearm_dynamics import JOINT_NAMES, build_model
-from forearm_dynamics.nodes.common import stream_qos
+
+__all__ = [  # the shared pieces are re-exported: the fault suite imports them from here
+    "GRAVITY", "MODEL", "MS", "POSTURE", "SIGNALS", "Diagnostics", "Procs", "TorqueHarness",
+    "cdr_stamp", "check_torque_stream", "joint_series", "joint_state", "private_domain",
+    "recorded", "stamp_of", "start_feeder",
+]
 
 MS = 1_000_000  # ns
 MODEL = build_model("segmented", 50)
@@ -49,122 +57,19 @@ def recorded(path: Path, topic: str, after_ns: int = 0) -> int:
         return 0
 
 
-def stamp_of(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
-def cdr_stamp(raw: bytes) -> int:
-    """header.stamp of a serialized stamped message (4-byte CDR encapsulation, then sec, nanosec)."""
-    sec, nsec = struct.unpack_from("<iI", raw, 4)
-    return sec * 1_000_000_000 + nsec
-
-
 def joint_state(t_ns: int, q=POSTURE, qd=None, names=JOINT_NAMES, effort=None) -> JointState:
-    msg = JointState()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
-    msg.header.frame_id = "humerus"
-    msg.name = list(names)
-    msg.position = [float(x) for x in q]
-    msg.velocity = [0.0] * len(msg.name) if qd is None else [float(x) for x in qd]
-    msg.effort = [] if effort is None else [float(x) for x in effort]
-    return msg
+    """support.jointstate.joint_state with the fault suite's defaults: its posture, at rest."""
+    return _joint_state(t_ns, q, np.zeros(len(names)) if qd is None else qd, effort, names=names)
 
 
-class Procs:
-    """Every process a test starts; all killed (by PID) at teardown, even on failure."""
-
-    def __init__(self):
-        self.items: list = []
-
-    def add(self, p):
-        self.items.append(p)
-        return p
-
-    def start(self, executable: str, *ros_args: str, domain: int) -> rosproc.NodeProcess:
-        return self.add(rosproc.start(executable, *ros_args, domain=domain))
-
-    def close(self) -> None:
-        for p in self.items:
-            proc = getattr(p, "proc", p)
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(timeout=10)
-
-
-class Diagnostics:
-    """The latest /diagnostics values of one node, and how many arrived."""
-
-    def __init__(self, peer: rosproc.Peer, prefix: str):
-        self.values: dict[str, str] = {}
-        self.count = 0
-        self._prefix = prefix
-        self._peer = peer
-        peer.node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 10)
-
-    def _on(self, msg: DiagnosticArray) -> None:
-        for status in msg.status:
-            if status.name.startswith(self._prefix):
-                self.values = {kv.key: kv.value for kv in status.values}
-                self.count += 1
-
-    def get(self, key: str) -> int:
-        return int(self.values.get(key, 0))
-
-    def fresh(self, pred=lambda d: True, timeout: float = 10.0) -> dict[str, str]:
-        """The first values published from now on that satisfy pred."""
-        start = self.count
-        ok = self._peer.spin_until(lambda: self.count > start and pred(self.values), timeout)
-        assert ok, f"diagnostics never satisfied the check: {self.values}"
-        return dict(self.values)
-
-
-class TorqueHarness:
-    """A torque_node process on a private domain, and a peer that feeds it and listens."""
+class TorqueHarness(_TorqueHarness):
+    """support.torque_harness.TorqueHarness on a private domain, fed at the suite's posture,
+    stamps never behind the wall clock."""
 
     def __init__(self, procs: Procs, *node_args: str, reply_depth: int = 20000,
                  peer_name: str = "fault_peer"):
-        self.domain = private_domain()
-        # the backward estimator: its outputs are exactly known, so "the next good sample is
-        # exact" can be checked to 1e-8 (the default estimator: test_torque_node.py)
-        self.proc = procs.start("torque_node", "-p", "diagnostics_period:=0.2",
-                                "-p", "estimator:=backward", *node_args, domain=self.domain)
-        self.peer = rosproc.Peer(peer_name, domain=self.domain)
-        node = self.peer.node
-        self.pub = node.create_publisher(JointState, "joint_states", stream_qos(1000))
-        self.replies: list[JointState] = []
-        node.create_subscription(JointState, "joint_torques", self.replies.append,
-                                 stream_qos(reply_depth))
-        self.diag = Diagnostics(self.peer, "torque_node")
-        self.t_ns = (time.time_ns() // MS) * MS
-        ok = self.peer.spin_until(lambda: self.pub.get_subscription_count() > 0, 30)
-        assert ok, self.proc.output()
-        deadline = time.monotonic() + 30
-        while not self.replies:  # discovery complete both ways
-            assert time.monotonic() < deadline and self.proc.running(), self.proc.output()
-            self.pub.publish(joint_state(self.stamp()))
-            self.peer.spin_for(0.1)
-
-    def stamp(self, dt_ns: int = MS) -> int:
-        """The next stamp: dt after the previous one, and never behind the wall clock."""
-        self.t_ns = max(self.t_ns + dt_ns, time.time_ns())
-        return self.t_ns
-
-    def exchange(self, msgs: list[JointState], last: int | None = None, timeout: float = 15.0):
-        """Publish msgs; every reply up to the one answering stamp `last` (default: the last msg's)."""
-        self.peer.spin_for(0.0)
-        self.replies.clear()
-        for m in msgs:
-            self.pub.publish(m)
-        last = stamp_of(msgs[-1]) if last is None else last
-        ok = self.peer.spin_until(lambda: any(stamp_of(r) == last for r in self.replies), timeout)
-        assert ok, f"no reply to stamp {last}\n{self.proc.output()[-3000:]}"
-        return list(self.replies)
-
-    def log_since(self, mark: int) -> str:
-        return self.proc.output()[mark:]
-
-    def close(self) -> None:
-        self.peer.close()
+        super().__init__(procs, *node_args, domain=private_domain(), reply_depth=reply_depth,
+                         peer_name=peer_name, follow_wall_clock=True, posture=POSTURE)
 
 
 # -- a JointState feeder in its own process (the test's peer only listens) -----------------

@@ -24,6 +24,7 @@ __all__ = [
     "BIN",
     "NodeProcess",
     "Peer",
+    "Procs",
     "apply_to_this_process",
     "domain_id",
     "release_test_domains",
@@ -119,6 +120,30 @@ def start(executable: str, *ros_args: str, domain: int | None = None) -> NodePro
     """Start a console script of this venv with `--ros-args *ros_args` (if any)."""
     return NodeProcess.script(executable, list(ros_args), ros_env(domain), _LOG_DIR,
                               split_stderr=True)
+
+
+class Procs:
+    """Every process a test starts; all killed (by PID) at teardown, even on failure.
+
+    conftest's `procs` (one per test) and `module_procs` (one per module) fixtures hand one
+    out and close it; start processes through it, never bare, so a failed test leaves none."""
+
+    def __init__(self):
+        self.items: list = []
+
+    def add(self, p):
+        self.items.append(p)
+        return p
+
+    def start(self, executable: str, *ros_args: str, domain: int | None = None) -> NodeProcess:
+        return self.add(start(executable, *ros_args, domain=domain))
+
+    def close(self) -> None:
+        for p in self.items:
+            proc = getattr(p, "proc", p)
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(timeout=10)
 
 
 class Peer:

@@ -16,8 +16,8 @@ from mcap.stream_reader import breakup_chunk
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from support.jointstate import joint_state_bytes
 
 from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.bag import BagWriter, TopicQos, open_bag, recover
@@ -32,6 +32,8 @@ from forearm_dynamics.errors import (
 )
 from forearm_dynamics.exit_codes import USAGE
 
+pytestmark = pytest.mark.unit
+
 T0 = 1_700_000_000_000_000_000
 N_STATES = 6000
 
@@ -39,13 +41,9 @@ N_STATES = 6000
 def joint_state(k: int) -> bytes:
     # effort filled: Fast-CDR (rclpy) pads an empty float64[] with 4 bytes that rosbags'
     # strict size check rejects when deserialising (the bag itself is fine either way).
-    m = JointState()
-    m.header.stamp.sec, m.header.stamp.nanosec = divmod(T0 + k * 1_000_000, 10**9)
-    m.name = list(JOINT_NAMES)
-    m.position = [0.001 * k + j for j in range(20)]
-    m.velocity = [-0.5 * j for j in range(20)]
-    m.effort = [0.25 * j for j in range(20)]
-    return serialize_message(m)
+    return joint_state_bytes(T0 + k * 1_000_000, [0.001 * k + j for j in range(20)],
+                             [-0.5 * j for j in range(20)], [0.25 * j for j in range(20)],
+                             frame_id="")
 
 
 def diagnostics(k: int) -> bytes:

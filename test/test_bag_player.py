@@ -22,6 +22,8 @@ from std_msgs.msg import String
 
 from forearm_dynamics.nodes.common import stream_qos
 
+pytestmark = pytest.mark.ros
+
 N = 1500  # 1.5 s at 1 kHz
 _RUNS = itertools.count()
 GAP = 400 * MS  # a silent gap after sample 999: the player must wait it out

@@ -14,6 +14,8 @@ from rosbags.rosbag2 import Reader
 
 from forearm_dynamics.bag import open_bag, recover
 
+pytestmark = pytest.mark.ros
+
 PUBLISHER = r"""
 import sys, time
 import rclpy

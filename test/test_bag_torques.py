@@ -18,6 +18,8 @@ from forearm_dynamics.bag import BagWriter
 from forearm_dynamics.estimation import make_estimator
 from forearm_dynamics.estimation.offline import backward_batch
 
+pytestmark = pytest.mark.cli
+
 N = 3000
 
 

@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 import rosproc
 
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
 PERCENTILES = ("n", "p50", "p99", "p99_9", "max", "mean")
 ROOT = Path(__file__).resolve().parents[1]  # `python -m benchmarks` runs from the repository
 #: A section another benchmark wrote before (e.g. benchmarks/estimation.py): must be kept.

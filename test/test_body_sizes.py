@@ -8,6 +8,8 @@ from forearm_dynamics import build_model
 from forearm_dynamics.anthropometry import resolve_body_size
 from forearm_dynamics.paths import config_file
 
+pytestmark = pytest.mark.unit
+
 # ANSUR II (2012) 5th / 50th / 95th percentiles, men (n = 4082) | women (n = 1986), mm
 # (body mass kg), as tabulated in the design notes Sec. 3 from the public survey data.
 SOURCE = {

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -14,7 +12,6 @@ import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.serialization import serialize_message
-from rosproc import ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -24,6 +21,8 @@ from forearm_dynamics.cli.check_bag import main as check_bag
 from forearm_dynamics.model_config import model_config
 from forearm_dynamics.paths import config_file
 from forearm_dynamics.reference import save_reference
+
+pytestmark = pytest.mark.unit
 
 T_START = 1_750_000_000_000_000_000
 MOVEMENTS = (1, 28)  # wrist pronation at elbow 0; close hand + flexing elbow
@@ -294,25 +293,22 @@ def test_truncated_bag_is_analysed_with_a_warning(good_bag, reference, tmp_path,
     assert _check(recovered, reference, capsys=capsys)[0] == 0
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    # a clean ROS environment: the child re-runs the wheels' bootstrap itself
-    return subprocess.run([sys.executable, "-m", "forearm_dynamics.cli.check_bag", *args],
-                          check=False, capture_output=True, text=True, env=ros_env(), timeout=60)
-
-
 @pytest.mark.parametrize("case", ["empty", "random", "magic_only", "cut_early", "missing"])
-def test_corrupt_files_exit_2_with_one_line(tmp_path, good_bag, case) -> None:
+def test_corrupt_files_exit_2_with_one_line(tmp_path, good_bag, case, capsys) -> None:
+    """In-process (an escaping exception fails the test); the console script as users run it,
+    real stderr and exit code: test_faults_files.test_cli_never_prints_a_traceback."""
     path = tmp_path / f"{case}.mcap"
     content = {"empty": b"", "random": os.urandom(10000), "magic_only": b"\x89MCAP0\r\n",
                "cut_early": good_bag.read_bytes()[:3000], "missing": None}[case]
     if content is not None:
         path.write_bytes(content)
-    res = _cli(str(path))
-    assert res.returncode == 2
-    assert res.stdout == ""
-    lines = res.stderr.strip().splitlines()
+    code = check_bag([str(path)])
+    out = capsys.readouterr()
+    assert code == 2
+    assert out.out == ""
+    lines = out.err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("check_bag: error:") and str(path) in lines[0]
-    assert "Traceback" not in res.stderr
+    assert "Traceback" not in out.err
 
 
 @pytest.mark.parametrize(("run", "needle"), [

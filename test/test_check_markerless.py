@@ -17,6 +17,8 @@ from forearm_dynamics import build_model
 from forearm_dynamics.bag import BagWriter, TopicQos
 from forearm_dynamics.model_config import model_config
 
+pytestmark = pytest.mark.cli
+
 N = 8000  # 8 s at 1 kHz
 
 

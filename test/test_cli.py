@@ -5,8 +5,11 @@ import sys
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from forearm_dynamics import build_model
+
+pytestmark = pytest.mark.cli
 
 
 def run(*args):

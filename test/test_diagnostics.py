@@ -3,9 +3,12 @@ samples: percentiles, rates' counters, rejection totals, level and message."""
 
 from __future__ import annotations
 
+import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from forearm_dynamics.nodes.diagnostics import PipelineStats
+
+pytestmark = pytest.mark.unit
 
 
 def values(status: DiagnosticStatus) -> dict[str, str]:

@@ -18,6 +18,8 @@ from forearm_dynamics.estimation import (
 )
 from forearm_dynamics.estimation.kalman import process_noise, steady_state, transition
 
+pytestmark = pytest.mark.unit
+
 FIXED_NOISE = {"kalman_noise_deg": 0.5}  # exactness tests: no online estimate in the way
 
 
@@ -378,6 +380,7 @@ def fast_movement(rate: float, amplitude: float, transition: float, n_joints: in
     return t, 0.2 + s[:, None] * amplitude * signs, (ds / transition)[:, None] * amplitude * signs
 
 
+@pytest.mark.slow  # 16 cases, ~17 s of CPU: not in `-m unit`
 @pytest.mark.parametrize("rate", [20.0, 30.0, 100.0, 1000.0])
 @pytest.mark.parametrize("noise_deg", [0.0, 0.5, 2.0, 5.0])
 def test_kalman_gate_never_fires_on_fast_movements_or_noise(rate, noise_deg) -> None:
@@ -395,6 +398,7 @@ def test_kalman_gate_never_fires_on_fast_movements_or_noise(rate, noise_deg) -> 
             assert e.discontinuities == 0, (rep, v is None)
 
 
+@pytest.mark.slow
 def test_kalman_gate_never_fires_on_the_other_test_streams() -> None:
     """The noisy and irregular streams above: noise 0.1 / 2 deg online, the 4000-column
     white-jerk process, quadratics with jitter and drops."""

@@ -38,12 +38,7 @@ from rosbags.rosbag2 import Reader
 from forearm_dynamics.bag import BagWriter, open_bag, recover
 from forearm_dynamics.errors import BagWriteError
 
-
-@pytest.fixture
-def procs():
-    p = Procs()
-    yield p
-    p.close()
+pytestmark = [pytest.mark.faults, pytest.mark.ros]
 
 
 def _mount(target: Path, *options: str) -> bool:

@@ -29,6 +29,8 @@ from test_check_bag import Run, write_run
 from forearm_dynamics.bag import BagWriter, open_bag
 from forearm_dynamics.cli.check_bag import main as check_bag
 
+pytestmark = [pytest.mark.faults, pytest.mark.cli]
+
 T0 = 1_750_000_000_000_000_000
 
 

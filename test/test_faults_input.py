@@ -25,7 +25,6 @@ from faultkit import (
     MODEL,
     MS,
     POSTURE,
-    Procs,
     TorqueHarness,
     cdr_stamp,
     joint_state,
@@ -39,6 +38,8 @@ from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.nodes import validation as v
 from forearm_dynamics.nodes.common import stream_qos
 
+pytestmark = [pytest.mark.faults, pytest.mark.ros]
+
 RNG = np.random.default_rng(3)
 V0, ACC = RNG.uniform(-1, 1, 20), RNG.uniform(-15, 15, 20)
 HOUR = 3600 * 1_000_000_000
@@ -46,15 +47,8 @@ BAD_Q = POSTURE + 0.25  # a bad sample's positions: any reply carrying them is a
 
 
 @pytest.fixture(scope="module")
-def procs():
-    p = Procs()
-    yield p
-    p.close()
-
-
-@pytest.fixture(scope="module")
-def h(procs):
-    harness = TorqueHarness(procs)
+def h(module_procs):
+    harness = TorqueHarness(module_procs)
     harness.diag.fresh(lambda d: "received_total" in d)  # every test starts from known counts
     yield harness
     harness.close()

@@ -15,6 +15,7 @@ import signal
 import time
 from pathlib import Path
 
+import pytest
 import rosproc
 from faultkit import MS, Procs, joint_state, private_domain, recorded, stamp_of
 from rcl_interfaces.msg import Parameter as ParameterMsg
@@ -31,6 +32,8 @@ from forearm_dynamics.nodes import bag_recorder, trajectory_publisher
 from forearm_dynamics.nodes.common import stream_qos
 from forearm_dynamics.nodes.stream_node import STREAM_SPECS
 from forearm_dynamics.nodes.torque_node import TorqueNode
+
+pytestmark = [pytest.mark.faults, pytest.mark.ros]
 
 SPECS = {
     "torque_node": TorqueNode.specs,

@@ -42,18 +42,13 @@ from forearm_dynamics.errors import BagError
 from forearm_dynamics.nodes.common import stream_qos
 from forearm_dynamics.paths import config_file
 
+pytestmark = [pytest.mark.faults, pytest.mark.ros]
+
 #: The backward estimator: these tests check every recorded torque against the model at the
 #: recorded state (check_torque_stream), which its exactly known outputs allow.
 EXACT = ("-p", "estimator:=backward")
 PUBLISHER_ARGS = ("-p", "movements:=[1, 28, 53]", "-p", "loop:=true", "-p", "start_delay:=0.5",
                   "-p", "subscriber_timeout:=30.0")
-
-
-@pytest.fixture
-def procs():
-    p = Procs()
-    yield p
-    p.close()
 
 
 class Watch:

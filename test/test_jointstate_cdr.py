@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
+from support.jointstate import joint_state as _joint_state
 
 from forearm_dynamics.codec.jointstate_cdr import (
     ENCAPSULATION,
@@ -27,18 +28,17 @@ from forearm_dynamics.codec.jointstate_cdr import (
     verify_layout,
 )
 
+pytestmark = pytest.mark.unit
+
 CDR_BE = b"\x00\x00\x00\x00"  # plain CDR, big endian
 XCDR2_LE = b"\x00\x07\x00\x00"  # PLAIN_CDR2, little endian
 
 
 def joint_state(frame_id="", names=(), position=(), velocity=(), effort=(), stamp=(12, 345)) -> JointState:
-    msg = JointState()
+    """support.jointstate.joint_state in the order these tests vary the fields; the stamp as
+    (sec, nanosec), any nanosec a uint32 holds (the parser must read what it is sent)."""
+    msg = _joint_state(0, position, velocity, effort, names=names, frame_id=frame_id)
     msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
-    msg.header.frame_id = frame_id
-    msg.name = list(names)
-    msg.position = [float(x) for x in position]
-    msg.velocity = [float(x) for x in velocity]
-    msg.effort = [float(x) for x in effort]
     return msg
 
 
@@ -245,6 +245,7 @@ def messages(draw) -> JointState:
                        stamp=(draw(st.integers(-(2**31), 2**31 - 1)), draw(st.integers(0, 2**32 - 1))))
 
 
+@pytest.mark.slow  # 300 examples, seconds of CPU: not in `-m unit`
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(msg=messages(), other=messages(), junk=st.binary(min_size=1, max_size=7),
        slack=st.integers(0, 16))

@@ -14,6 +14,8 @@ import pytest
 
 from forearm_dynamics import JOINT_NAMES, build_model
 
+pytestmark = pytest.mark.unit
+
 KINDS = ("anatomical", "solid", "segmented")
 S = np.diag([1.0, 1.0, -1.0])
 PAYLOAD = {"payload_mass": 0.8, "payload_com": (0.01, -0.05, -0.04),

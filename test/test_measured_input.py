@@ -29,6 +29,8 @@ from forearm_dynamics.estimation import DEFAULT_ESTIMATOR, RECOMMENDED_FOR_MEASU
 from forearm_dynamics.nodes.common import stream_qos
 from forearm_dynamics.nodes.trajectory_publisher import marker_qos
 
+pytestmark = pytest.mark.ros
+
 MOVEMENTS = [4, 14, 30]  # pronation, wrist flexion + adduction, opening the hand: elbow moving
 RATE_HZ = 100.0
 BOUND = 0.25  # global NRMSE, elbow and pro/sup (see the module docstring)

@@ -9,6 +9,8 @@ from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.anthropometry import resolve_body_size
 from forearm_dynamics.description import FINGERS, load_description
 
+pytestmark = pytest.mark.unit
+
 KINDS = ("anatomical", "solid", "segmented")
 G = np.array([0.0, -9.80665, 0.0])
 

@@ -15,6 +15,8 @@ from forearm_dynamics.model_config import config_in_force, model_config, model_f
 from forearm_dynamics.nodes.params import ParameterError
 from forearm_dynamics.nodes.torque_config import ModelRequest, build_bundle
 
+pytestmark = pytest.mark.unit
+
 RNG = np.random.default_rng(5)
 Q, QD, QDD = (RNG.uniform(-1, 1, 20) for _ in range(3))
 

@@ -8,6 +8,8 @@ from forearm_dynamics.description import load_description
 from forearm_dynamics.filtering import lowpass
 from forearm_dynamics.movements import min_jerk
 
+pytestmark = pytest.mark.unit
+
 IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
 
 

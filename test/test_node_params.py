@@ -10,6 +10,7 @@ import shutil
 import signal
 from pathlib import Path
 
+import pytest
 import rosproc
 import yaml
 from rcl_interfaces.srv import GetParameters
@@ -21,6 +22,8 @@ from forearm_dynamics.nodes.params import load_defaults
 from forearm_dynamics.nodes.stream_node import STREAM_SPECS
 from forearm_dynamics.nodes.torque_node import TorqueNode
 from forearm_dynamics.paths import config_dir
+
+pytestmark = pytest.mark.ros
 
 SPECS = {"torque_node": TorqueNode.specs, "trajectory_publisher": trajectory_publisher.SPECS,
          "null_echo_node": STREAM_SPECS, "bag_recorder": bag_recorder.SPECS,

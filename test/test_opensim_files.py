@@ -15,6 +15,8 @@ from rosproc import BIN, ros_env
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.formats.opensim import read_motion
 
+pytestmark = pytest.mark.cli
+
 START = 1000.0  # s: stamps start here
 # MoBL / ARMS coordinate -> our joint (the shipped map; signs +1)
 MAPPED = {"elbow_flexion": "elbow_flexion", "pro_sup": "pro_sup", "flexion": "wrist_flexion",

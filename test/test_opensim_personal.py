@@ -11,6 +11,8 @@ from forearm_dynamics import build_model
 from forearm_dynamics.dynamics import ArmModel
 from forearm_dynamics.opensim_engine import OpenSimArm
 
+pytestmark = pytest.mark.unit
+
 osim = pytest.importorskip("opensim")  # the optional [reference] extra; only a guard
 
 TOL = 1e-8  # N·m, absolute, as test_opensim.py

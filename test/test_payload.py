@@ -11,6 +11,8 @@ from forearm_dynamics.description import load_description
 from forearm_dynamics.dynamics import ArmModel
 from forearm_dynamics.tree import combine
 
+pytestmark = pytest.mark.unit
+
 G = np.array([0.0, -9.80665, 0.0])
 IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
 PROXIMAL = ("elbow_flexion", "pro_sup", "wrist_flexion", "wrist_deviation")

@@ -13,6 +13,8 @@ from rosproc import BIN, ros_env, start
 from forearm_dynamics import JOINT_NAMES, build_model, exit_codes, get_movement
 from forearm_dynamics.cli import demo
 
+pytestmark = pytest.mark.ros
+
 MOVEMENTS = [3, 9, 19, 30, 55]  # elbow 90, 0 (supination), flexing, extending, full pronation
 
 

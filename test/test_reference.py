@@ -9,6 +9,8 @@ import pytest
 from forearm_dynamics import build_model, get_movement
 from forearm_dynamics.reference import load_reference
 
+pytestmark = pytest.mark.unit
+
 
 def test_shipped_file_covers_everything():
     ref = load_reference()

@@ -24,6 +24,8 @@ from sensor_msgs.msg import JointState
 
 from forearm_dynamics.bag import BagWriter, TopicQos
 
+pytestmark = pytest.mark.ros
+
 MOVEMENTS = [3, 55]  # 1.5 s each
 # 250 Hz recorded, replayed at half speed (the stamps, hence the torques, do not depend on
 # it): a pipeline at 1 kHz on a 2-core machine shared with other jobs was seen to lose

@@ -10,16 +10,19 @@ import time
 import numpy as np
 import pytest
 import rosproc
-from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import DescribeParameters, SetParameters
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from support.jointstate import joint_state, stamp_of
+from support.torque_harness import TorqueHarness
 
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.description import load_description
 from forearm_dynamics.model_config import model_from_config
 from forearm_dynamics.nodes.common import CONFIG_TOPIC, latched_qos, stream_qos
+
+pytestmark = pytest.mark.ros
 
 MODEL = build_model("segmented", 50)
 MS = 1_000_000  # ns
@@ -27,84 +30,14 @@ RNG = np.random.default_rng(7)
 POSTURE = RNG.uniform(-0.5, 0.8, 20)
 
 
-def joint_state(t_ns: int, q, qd=None, names=JOINT_NAMES) -> JointState:
-    msg = JointState()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
-    msg.header.frame_id = "humerus"
-    msg.name = list(names)
-    msg.position = [float(x) for x in q]
-    msg.velocity = [] if qd is None else [float(x) for x in qd]
-    return msg
-
-
-def stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
-class Harness:
-    """One torque_node process and a peer that feeds it and collects its answers."""
-
-    def __init__(self):
-        # The backward estimator, whose every output is exactly known (exact for constant
-        # acceleration, warm-up rules): these tests check the node's pipeline to 1e-8. The
-        # estimators themselves: test_estimation.py; the default one end to end: below.
-        self.proc = rosproc.start("torque_node", "-p", "diagnostics_period:=0.2",
-                                  "-p", "estimator:=backward")
-        self.peer = rosproc.Peer("torque_test")
-        node = self.peer.node
-        self.pub = node.create_publisher(JointState, "joint_states", stream_qos(1000))
-        self.replies: list[JointState] = []
-        self.diag: dict[str, str] = {}
-        self.diag_count = 0
-        node.create_subscription(JointState, "joint_torques", self.replies.append, stream_qos(1000))
-        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
-        self.t_ns = (time.time_ns() // MS) * MS
-        self._connect()
-
-    def _on_diag(self, msg: DiagnosticArray) -> None:
-        for status in msg.status:
-            if status.name.startswith("torque_node"):
-                self.diag = {kv.key: kv.value for kv in status.values}
-                self.diag_count += 1
-
-    def _connect(self) -> None:
-        """Send static samples until one is answered: discovery is complete both ways."""
-        ok = self.peer.spin_until(lambda: self.pub.get_subscription_count() > 0, 20)
-        assert ok, self.proc.output()
-        deadline = time.monotonic() + 20
-        while not self.replies:
-            assert time.monotonic() < deadline and self.proc.running(), self.proc.output()
-            self.pub.publish(joint_state(self.stamp(), POSTURE, np.zeros(20)))
-            self.peer.spin_for(0.1)
-
-    def stamp(self, dt_ns: int = MS) -> int:
-        self.t_ns += dt_ns
-        return self.t_ns
-
-    def exchange(self, msgs: list[JointState], timeout: float = 10.0) -> list[JointState]:
-        """Publish msgs; return every reply up to the one answering the last message."""
-        self.peer.spin_for(0.0)
-        self.replies.clear()
-        for m in msgs:
-            self.pub.publish(m)
-        last = stamp_ns(msgs[-1])
-        ok = self.peer.spin_until(lambda: any(stamp_ns(r) == last for r in self.replies), timeout)
-        assert ok, f"no reply to the last sample\n{self.proc.output()[-2000:]}"
-        return list(self.replies)
-
-    def diag_after(self, pred, timeout: float = 5.0) -> dict[str, str]:
-        """The first /diagnostics values (published from now on) that satisfy pred."""
-        start = self.diag_count
-        ok = self.peer.spin_until(lambda: self.diag_count > start and pred(self.diag), timeout)
-        assert ok, f"diagnostics never satisfied the check: {self.diag}"
-        return self.diag
-
-
 @pytest.fixture(scope="module")
-def tn():
-    h = Harness()
+def tn(module_procs):
+    """One torque_node (backward estimator: its every output is exactly known, so these tests
+    check the node's pipeline to 1e-8; the default one end to end: below) on the session's
+    domain, for the module."""
+    h = TorqueHarness(module_procs, posture=POSTURE)
     yield h
-    h.peer.close()
+    h.close()
     assert h.proc.stop(signal.SIGINT) == 0, h.proc.output()[-2000:]
     assert "Traceback" not in h.proc.output()
 
@@ -136,7 +69,7 @@ def test_static_posture_gives_gravity_torques(tn) -> None:
     msgs = [joint_state(tn.stamp(500 * MS if k == 0 else MS), POSTURE, np.zeros(20))
             for k in range(5)]
     replies = tn.exchange(msgs)
-    assert [stamp_ns(r) for r in replies] == [stamp_ns(m) for m in msgs]
+    assert [stamp_of(r) for r in replies] == [stamp_of(m) for m in msgs]
     gravity = MODEL.gravity_torques(POSTURE)
     for r in replies:
         np.testing.assert_allclose(r.effort, gravity, rtol=0, atol=1e-9)
@@ -189,7 +122,7 @@ def test_shuffled_names_and_extra_joints(tn) -> None:
     q = np.concatenate([POSTURE[order], [np.nan, 1e308, -3.0]])  # extras are ignored
     qd = np.concatenate([np.zeros(20), [np.inf, 0.0, 1.0]])
     # first sample after a stamp jump: the estimator restarts, so qdd = 0 throughout
-    msgs = [joint_state(tn.stamp(500 * MS if k == 0 else MS), q, qd, names) for k in range(3)]
+    msgs = [joint_state(tn.stamp(500 * MS if k == 0 else MS), q, qd, names=names) for k in range(3)]
     msgs.append(joint_state(tn.stamp(), POSTURE, np.zeros(20)))  # the plain order again
     replies = tn.exchange(msgs)
     assert len(replies) == 4
@@ -244,11 +177,9 @@ BAD_STAMP = {  # offset (ns) of the bad sample from the good one before it
 def _bad_sample(case: str, good_stamp: int) -> JointState:
     if case in BAD_CONTENT:
         names, q, qd = BAD_CONTENT[case](list(JOINT_NAMES), list(POSTURE), [0.0] * 20)
-        return joint_state(good_stamp + MS // 2, q, qd, names)
+        return joint_state(good_stamp + MS // 2, q, qd, names=names)
     if case == "empty":
-        msg = JointState()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(good_stamp + MS // 2, 10**9)
-        return msg
+        return joint_state(good_stamp + MS // 2, names=(), frame_id="")
     offset = BAD_STAMP[case]
     return joint_state(0 if offset is None else good_stamp + offset, POSTURE, np.zeros(20))
 
@@ -258,16 +189,16 @@ def test_bad_sample_is_dropped_counted_and_warned(tn, case: str) -> None:
     reason = case.split("/")[0]
     before = int(tn.diag.get(f"rejected.{reason}", 0))
     good1 = joint_state(tn.stamp(500 * MS), POSTURE, np.zeros(20))  # estimator restarts
-    bad = _bad_sample(case, stamp_ns(good1))
+    bad = _bad_sample(case, stamp_of(good1))
     good2 = joint_state(tn.stamp(), POSTURE, np.zeros(20))
     replies = tn.exchange([good1, bad, good2])
     # nothing for the bad sample, correct torques right after it
-    assert [stamp_ns(r) for r in replies] == [stamp_ns(good1), stamp_ns(good2)]
+    assert [stamp_of(r) for r in replies] == [stamp_of(good1), stamp_of(good2)]
     expect_torques(replies[-1], POSTURE, np.zeros(20), np.zeros(20))
     assert tn.proc.running()
     assert tn.proc.wait_for_output(f"[{reason}]", 5), tn.proc.output()[-2000:]
     assert f"[{reason}]" in tn.proc.stderr()
-    diag = tn.diag_after(lambda d: int(d.get(f"rejected.{reason}", 0)) >= before + 1)
+    diag = tn.diag.fresh(lambda d: int(d.get(f"rejected.{reason}", 0)) >= before + 1)
     assert int(diag[f"rejected.{reason}"]) == before + 1
 
 
@@ -280,14 +211,14 @@ def test_stamp_gap_resets_the_estimator(tn) -> None:
     assert len(replies) == 4
     expect_torques(replies[2], q[2], qd[2], a)
     expect_torques(replies[3], q[3], qd[3], np.zeros(20))  # restarted: warm-up again
-    tn.diag_after(lambda d: int(d["reset.stamp_gap"]) >= before + 2)  # this jump and the first
+    tn.diag.fresh(lambda d: int(d["reset.stamp_gap"]) >= before + 2)  # this jump and the first
 
 
 def test_slow_streams_are_not_gaps(tn) -> None:
     """The adaptive max_stamp_gap (default 0): a 20 Hz then 5 Hz stream keeps its history
     (every sample after the first is a real estimate, exact for constant acceleration);
     only the 0.5 s jump to the stream's first sample resets the estimator."""
-    before = int(tn.diag_after(lambda d: True)["reset.stamp_gap"])
+    before = int(tn.diag.fresh(lambda d: True)["reset.stamp_gap"])
     dt = np.array([50] * 5 + [200] * 5) * MS  # 20 Hz, then 5 Hz
     stamps, q, qd, a = constant_acceleration(10, dt, tn.stamp(500 * MS))
     tn.t_ns = int(stamps[-1])
@@ -296,7 +227,7 @@ def test_slow_streams_are_not_gaps(tn) -> None:
     expect_torques(replies[0], q[0], qd[0], np.zeros(20))
     for k in range(1, 10):
         expect_torques(replies[k], q[k], qd[k], a)
-    assert int(tn.diag_after(lambda d: True)["reset.stamp_gap"]) == before + 1
+    assert int(tn.diag.fresh(lambda d: True)["reset.stamp_gap"]) == before + 1
 
 
 def test_parameters_are_described(tn) -> None:
@@ -324,10 +255,10 @@ def test_parameters_are_described(tn) -> None:
 def test_diagnostics_report_the_pipeline(tn) -> None:
     """The node's own counters agree with what this test sent and got back (the timing
     figures of a period are checked on PipelineStats itself, test_diagnostics.py)."""
-    before = tn.diag_after(lambda d: True)
+    before = tn.diag.fresh(lambda d: True)
     replies = tn.exchange([joint_state(tn.stamp(), POSTURE, np.zeros(20)) for _ in range(20)])
     n0 = int(before["processed_total"])
-    diag = tn.diag_after(lambda d: int(d["processed_total"]) >= n0 + 20)
+    diag = tn.diag.fresh(lambda d: int(d["processed_total"]) >= n0 + 20)
     assert len(replies) == 20
     assert int(diag["received_total"]) - int(before["received_total"]) == 20
     assert int(diag["processed_total"]) - n0 == 20
@@ -377,14 +308,14 @@ def test_null_echo_node_shares_the_pipeline(tn) -> None:
         while not got:
             assert time.monotonic() < deadline and echo.running(), echo.output()
             q = np.append(POSTURE[order], 0.0)
-            tn.pub.publish(joint_state(tn.stamp(), q, np.arange(21.0), names))
+            tn.pub.publish(joint_state(tn.stamp(), q, np.arange(21.0), names=names))
             tn.peer.spin_for(0.1)
         r = got[-1]
         assert list(r.name) == list(JOINT_NAMES)
         np.testing.assert_array_equal(r.position, POSTURE)
         np.testing.assert_array_equal(r.velocity, np.argsort(order).astype(float))
         np.testing.assert_array_equal(r.effort, np.zeros(20))
-        assert stamp_ns(r) <= tn.t_ns
+        assert stamp_of(r) <= tn.t_ns
     finally:
         assert echo.stop(signal.SIGTERM) == 0, echo.output()
     assert "Traceback" not in echo.output()

@@ -21,6 +21,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 import rosproc
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.srv import SetParametersAtomically
@@ -32,6 +33,8 @@ from std_msgs.msg import String
 from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.model_config import config_in_force, model_from_config
 from forearm_dynamics.nodes.common import stream_qos
+
+pytestmark = pytest.mark.ros
 
 MS = 1_000_000
 N = 4000  # samples at 1 kHz

@@ -20,12 +20,15 @@ import signal
 import time
 
 import numpy as np
+import pytest
 import rosproc
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.nodes.common import stream_qos
+
+pytestmark = pytest.mark.ros
 
 MS = 1_000_000
 RNG = np.random.default_rng(11)

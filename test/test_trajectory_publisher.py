@@ -17,6 +17,8 @@ from forearm_dynamics import JOINT_NAMES, get_movement
 from forearm_dynamics.nodes.common import stream_qos
 from forearm_dynamics.nodes.trajectory_publisher import marker_qos
 
+pytestmark = pytest.mark.ros
+
 RATE = 1000.0
 
 

@@ -20,6 +20,8 @@ from forearm_dynamics.anthropometry import resolve_body_size
 from forearm_dynamics.builders import forearm_cylinder
 from forearm_dynamics.description import FINGERS, load_description
 
+pytestmark = pytest.mark.unit
+
 KINDS = ("anatomical", "solid", "segmented")
 CYLINDERS = {"forearm_proximal", "forearm_distal", "thumb_metacarpal", "thumb_proximal",
              "thumb_distal", *(f"{f}_{s}" for f in FINGERS for s in ("proximal", "middle", "distal"))}

@@ -1,0 +1,11 @@
+"""Test support shared by every test module (not installed, not a test module itself).
+
+- support.jointstate: the one JointState builder (and stamp helpers) every test uses.
+- support.torque_harness: the one torque_node harness: a real node process and an rclpy peer
+  that feeds it and collects its answers and diagnostics.
+
+Beside it, in test/: rosproc (start real node processes on a private loopback domain; Procs,
+behind conftest's `procs` and `module_procs` fixtures), faultkit (the fault suite's pieces),
+bagkit (synthetic bags), trajectories (smooth analytic trajectories). docs/testing.md has the
+tiers and which fixture to use for what.
+"""
