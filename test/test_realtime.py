@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 import rosproc
-from faultkit import Procs, TorqueHarness, joint_state
+from faultkit import TorqueHarness, joint_state
 from std_msgs.msg import String
 
 from forearm_dynamics import realtime
@@ -39,13 +39,6 @@ def _may_set_fifo() -> bool:
 
 
 needs_fifo = pytest.mark.skipif(not _may_set_fifo(), reason="needs CAP_SYS_NICE or rtprio >= 50")
-
-
-@pytest.fixture
-def procs():
-    p = Procs()
-    yield p
-    p.close()
 
 
 def _threads(pid: int) -> list[realtime.ThreadSched]:
