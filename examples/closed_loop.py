@@ -52,6 +52,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import tempfile
 import time
@@ -60,7 +61,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import rclpy
+from rclpy.experimental import EventsExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -285,16 +288,11 @@ def main(argv: list[str] | None = None) -> int:
                                      "-p", "estimator:=backward", *sim_time],
                      env, out / "logs"),
     ]
-    import os
-
     os.environ.update({k: v for k, v in env.items() if k.startswith("ROS_")})
     rclpy.init()
     node = rclpy.create_node("closed_loop_controller")
     ctrl = Controller(node, build_model("segmented", 50), start, not args.no_feedforward,
                       args.lockstep)
-    from rclpy.experimental import EventsExecutor
-    from rclpy.task import Future
-
     executor = EventsExecutor()
     executor.add_node(node)
 
