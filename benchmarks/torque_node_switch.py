@@ -73,21 +73,21 @@ def main() -> None:
         t = time.perf_counter_ns()
         cb(data)
         cost[k] = time.perf_counter_ns() - t
-        if live and hasattr(node, "_bundle"):
-            ids[k] = node._bundle.config_id
+        if live and hasattr(node, "live"):
+            ids[k] = node.live.in_use.config_id
         time.sleep(0.0002)  # a node sleeps between samples; so does this one
     warm = slice(1000, None)
     steady = cost[warm][~near[warm]] / 1e3
     print(f"callback (us) steady p50/p99/max: {np.percentile(steady, 50):.1f}/"
           f"{np.percentile(steady, 99):.1f}/{steady.max():.1f} over {steady.size} samples")
-    if asked and hasattr(node, "_bundle"):
+    if asked and hasattr(node, "live"):
         during = cost[near] / 1e3
         print(f"callback (us) in the 50 samples after each of {len(asked)} live changes "
               f"p50/p99/max: {np.percentile(during, 50):.1f}/{np.percentile(during, 99):.1f}/"
               f"{during.max():.1f}")
         lag = [int(np.argmax(ids[k:] != ids[k - 1])) for k, _ in asked]
-        print(f"live changes applied: {node.live_changes['applied']}, last build "
-              f"{node._bundle.build_ms:.2f} ms (worker thread); the new model was in use "
+        print(f"live changes applied: {node.live.counts()['applied']}, last build "
+              f"{node.live.in_use.build_ms:.2f} ms (worker thread); the new model was in use "
               f"{lag} samples after each request (samples 0.2 ms apart in wall time here)")
     node._worker.stop() if hasattr(node, "_worker") else None
     node.destroy_node()

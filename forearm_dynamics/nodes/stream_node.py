@@ -133,10 +133,6 @@ class JointStreamNode(RealtimeNode, Node):
     """Validates joint_states, gathers model-order q/qd, lets compute() fill effort."""
 
     specs: tuple[Spec, ...] = STREAM_SPECS
-    _announce = None  # set by a subclass when after_publish() must see the next output
-    #: set by a subclass to publish more after each output: hook(sec, nanosec), called
-    #: after joint_torques is published and inside the callback's timing
-    output_hook = None
     config_name: str = ""  # config/<config_name>.yaml holds the defaults
 
     def __init__(self, node_name: str):
@@ -166,6 +162,9 @@ class JointStreamNode(RealtimeNode, Node):
                                   else self.settings.max_stamp_gap) * 1e9)
         self._last_dt_ns = 0  # previous sample interval (adaptive gap); 0 = none yet
         self._warned: dict[str, tuple[float, int]] = {}
+        # the after_output hook costs a call per output only where a subclass defines it
+        overridden = type(self).after_output is not JointStreamNode.after_output
+        self._after_output = self.after_output if overridden else None
 
         s = self.settings
         qos = stream_qos(s.qos_depth, s.qos_reliable)
@@ -207,8 +206,24 @@ class JointStreamNode(RealtimeNode, Node):
         """Read the subclass's own parameters; return the output joint names."""
         raise NotImplementedError
 
-    def after_publish(self, sec: int, nanosec: int) -> None:
-        """Called after publishing an output while `_announce` is set."""
+    def after_output(self, sec: int, nanosec: int) -> None:
+        """Called right after every output is published (header stamp sec, nanosec), on the
+        executor thread and inside the callback's timing, if a subclass defines it: to
+        publish a companion message of the same sample (joint_torques_std), or to state a
+        config applied from that stamp."""
+
+    def diagnostic_values(self, status) -> dict[str, str]:  # noqa: ARG002 - a hook
+        """A subclass's own key-values for its /diagnostics status (it may also set
+        status.level and status.message); the timing values are added after them."""
+        return {}
+
+    def after_diagnostics(self) -> None:
+        """Called after each /diagnostics message (e.g. to republish a latched config)."""
+
+    def sample_interval_s(self, default: float = 1e-3) -> float:
+        """The interval between the last two accepted input stamps (s); `default` before
+        two samples, or right after a reset."""
+        return self._last_dt_ns * 1e-9 if self._last_dt_ns else default
 
     def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool | None:
         """Fill self.effort (and self.qd if not velocity_given); return warm, or None when
@@ -263,16 +278,14 @@ class JointStreamNode(RealtimeNode, Node):
         self.pub.publish(out.payload())
         t_end = _perf_ns()
         t_pub_ns = t_end - t_pub
-        if self.output_hook is not None:  # a second output of the same sample, after the first
-            self.output_hook(sec, nsec)
+        if self._after_output is not None:  # e.g. a second output of the same sample
+            self._after_output(sec, nsec)
             t_end = _perf_ns()
         stats.published += 1
         if not warm:
             stats.warmup += 1
         stats.record(t_end - t_start, recv_ns - t_ns, t_pub_ns)
         self.deadlines.check_input(recv_ns - t_ns, t_end - t_start)
-        if self._announce is not None:
-            self.after_publish(sec, nsec)
 
     def _check_finite(self, velocity_given: bool) -> None:
         """After a non-finite q.qd (or sum): reject NaN/inf in q or qd (else it was overflow)."""
@@ -376,8 +389,10 @@ class JointStreamNode(RealtimeNode, Node):
     def _publish_diagnostics(self) -> None:
         v.flush_suppressed(self._warned, self.get_logger(), WARN_EVERY_S)
         status = self.stats.status(f"{self.get_name()}: pipeline", self.get_fully_qualified_name())
-        status.values.extend(KeyValue(key=k, value=x) for k, x in self.timing_values().items())
+        values = {**self.diagnostic_values(status), **self.timing_values()}
+        status.values.extend(KeyValue(key=k, value=x) for k, x in values.items())
         self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
+        self.after_diagnostics()
 
     def timing_values(self) -> dict[str, str]:
         """Deadline, real-time and garbage-collection key-values for /diagnostics."""

@@ -29,23 +29,22 @@ Live changes (torque_config.py): model, body_size, side, payload_*, placement, s
 custom anthropometry and estimator parameters can be set at runtime. A change is
 validated on the executor thread (cheap; refused with the reason, nothing changes), built
 on this node's worker thread and swapped in by the subscription callback between two
-samples (one reference: `self._latest` is the newest built bundle, `self._bundle` the one
-in use). Several parameters set together (set_parameters_atomically) are one build and
-one swap. A change of model only keeps the estimator (and its history); a change of
-estimator settings starts a fresh one (it warms up again, counted as warm-up).
+samples (live_model.py: one ROS-free object owns the bundle in use, the newest built
+one, the config ids and texts and the switch counters). Several parameters set together
+(set_parameters_atomically) are one build and one swap. A change of model only keeps the
+estimator (and its history); a change of estimator settings starts a fresh one (it warms
+up again, counted as warm-up).
 Other parameters are read-only (their descriptors say so).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import time
 
 import numpy as np
 import pinocchio as pin
 import rclpy
-from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -55,7 +54,7 @@ from ..model_config import config_message
 from ..version import package_version
 from . import validation as v
 from .common import latched_qos, main_for, stream_qos
-from .diagnostics import diagnostic_array
+from .live_model import LiveModel
 from .model_builder import ModelBuilder
 from .params import ParameterError, Params
 from .std_output import StdTemplates
@@ -74,7 +73,6 @@ _monotonic_ns = time.monotonic_ns
 #: output_rate_hz: how late (s) the output may fall behind its deadlines and still catch
 #: up, at most one output per tick (twice the rate); a longer stall drops the periods
 _MAX_BACKLOG_S = 0.05
-_PENDING = "__applies_from_stamp_ns__"  # placeholder in a prepared config text
 
 
 class TorqueNode(JointStreamNode):
@@ -91,13 +89,9 @@ class TorqueNode(JointStreamNode):
                                                  stream_qos(s.qos_depth, s.qos_reliable))
             self._std_templates = StdTemplates(self.joint_names)
             self._std_unknown = np.full(len(self.joint_names), np.inf)
-            self.output_hook = self._publish_std
         self.config_pub = self.create_publisher(String, NODE_CONFIG_TOPIC, latched_qos())
-        self._config_json = ""
-        self._config_text: dict[int, str] = {}
         self._version = package_version()
-        self._announce: ModelBundle | None = None  # installed, not yet stated with its stamp
-        self._publish_config(self._bundle, 0)
+        self._publish_config(self.live.in_use, 0)
         # a helper thread: stays at normal priority
         self._worker = ModelBuilder(self.build, self._publish_config)
         self.add_on_set_parameters_callback(self._on_set)
@@ -110,7 +104,7 @@ class TorqueNode(JointStreamNode):
             self._due_ns = 0
             self._max_backlog_ns = max(round(_MAX_BACKLOG_S * 1e9), 2 * self._period_ns)
             self.create_timer(0.5 / self.output_rate_hz, self._on_tick)
-        b = self._bundle
+        b = self.live.in_use
         self.get_logger().info(
             f"model {b.arm.kind}, body size {b.arm.body_size.label}, estimator "
             f"{b.request.estimator}; config on {self.config_pub.topic_name}"
@@ -122,8 +116,8 @@ class TorqueNode(JointStreamNode):
         return (self._worker.native_id,)
 
     def on_realtime_applied(self) -> None:
-        self._config_text = {}  # the config states the scheduling the node got: restate it
-        self._publish_config(self._bundle, 0)
+        self.live.restate()  # the config states the scheduling the node got: restate it
+        self._publish_config(self.live.in_use, 0)
 
     def configure(self, params: Params) -> tuple[str, ...]:
         self.output_rate_hz = params.value("output_rate_hz")
@@ -146,12 +140,13 @@ class TorqueNode(JointStreamNode):
             bundle = build_bundle(request, 1, bundle.arm.nv, std=self._std_topic)
         self._std_ready = False  # the last output has a σ to publish
         self._std_known = False  # ... and it is known (else inf: warming up)
-        self._bundle = self._latest = bundle
-        self._next_id = 2
-        self.live_changes = {"applied": 0, "refused": 0, "failed": 0}
-        # output_rate_hz > 0: the estimate at the last update, and the input clock
-        n = bundle.arm.nv
-        self._anchor = (np.zeros(n), np.zeros(n), np.zeros(n))
+        std = self._std_topic
+
+        def make(request: ModelRequest, config_id: int, n: int, previous: ModelBundle) -> ModelBundle:
+            return build_bundle(request, config_id, n, previous, std=std)
+
+        self.live = LiveModel(bundle, make, self.config_message)
+        # output_rate_hz > 0: whether the estimator holds a state to predict from, the input clock
         self._have_state = False
         self._last_in_ns = 0  # receive time of the last input (system clock)
         self._last_out_ns = 0
@@ -163,10 +158,10 @@ class TorqueNode(JointStreamNode):
 
     # -- the hot path --------------------------------------------------------------------
     def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool | None:
-        b = self._latest
-        if b is not self._bundle:  # a live change was built: swap between two samples
-            reset = self._install(b) or reset
-            b = self._bundle
+        b, fresh = self.live.current()  # a live change built: swapped in between two samples
+        if fresh:
+            self._have_state = False
+            reset = True
         est = b.estimator
         ts = b.std
         if reset:
@@ -178,11 +173,7 @@ class TorqueNode(JointStreamNode):
         except ValueError as exc:  # the estimator refuses a sample (state unchanged)
             raise v.Rejection(v.NON_FINITE, str(exc)) from None
         self._velocity_given = velocity_given
-        if self.output_rate_hz > 0:  # the timer publishes; keep the estimate at t_ns
-            a_q, a_qd, a_qdd = self._anchor
-            np.copyto(a_q, est.q)
-            np.copyto(a_qd, est.qd)
-            np.copyto(a_qdd, est.qdd)
+        if self.output_rate_hz > 0:  # the timer publishes (est.predict keeps this estimate)
             self._have_state = True
             self._state_t_ns = t_ns
             self._last_in_ns = _time_ns()
@@ -205,30 +196,18 @@ class TorqueNode(JointStreamNode):
         np.copyto(self.effort, tau)
         return warm
 
-    def _publish_std(self, sec: int, nanosec: int) -> None:
-        """Output hook: joint_torques_std for the output just published (same header, names);
-        σ = inf while the estimate is warming up (its error is not what the covariance says)."""
+    def after_output(self, sec: int, nanosec: int) -> None:
+        """After each output: joint_torques_std for it (same header and names; σ = inf while
+        the estimate warms up: its error is not what the covariance says), and the first
+        output of a new config states that config, applied from this output's stamp."""
         if self._std_ready:
             t = self._std_templates.get(self.out.frame_id)
-            std = self._bundle.std.std if self._std_known else self._std_unknown
+            std = self.live.in_use.std.std if self._std_known else self._std_unknown
             self.std_pub.publish(t.fill(sec, nanosec, std))
-
-    def after_publish(self, sec: int, nanosec: int) -> None:
-        """Called after an output is published while a new config awaits its first stamp."""
-        b = self._announce
-        if b is not None and b is self._bundle:
-            self._announce = None  # the worker thread publishes it: no JSON work here
-            self._worker.announce(b, sec * 1_000_000_000 + nanosec)
-
-    def _install(self, b: ModelBundle) -> bool:
-        """Make `b` the bundle in use; True if its estimator is new (history reset)."""
-        fresh = b.estimator is not self._bundle.estimator
-        self._bundle = b
-        self._announce = b
-        self.live_changes["applied"] += 1
-        if fresh:
-            self._have_state = False
-        return fresh
+        if self.live.announcing:
+            b = self.live.first_output()
+            if b is not None:  # the worker thread publishes it: no JSON work here
+                self._worker.announce(b, sec * 1_000_000_000 + nanosec)
 
     # -- fixed-rate output ---------------------------------------------------------------
     def _on_tick(self) -> None:
@@ -265,13 +244,9 @@ class TorqueNode(JointStreamNode):
             return False
         t_start = time.perf_counter_ns()
         stamp = max(now, self._last_out_ns + 1)
-        b = self._bundle
+        b = self.live.in_use
         est = b.estimator
-        a_q, a_qd, a_qdd = self._anchor
-        np.copyto(est.q, a_q)
-        np.copyto(est.qd, a_qd)
-        np.copyto(est.qdd, a_qdd)
-        est.predict(stamp)
+        est.predict(stamp)  # from the last update's estimate, whatever was predicted before
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
         tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
@@ -287,8 +262,7 @@ class TorqueNode(JointStreamNode):
         if self._silent is not None:
             self.get_logger().info("input back: publishing again")
             self._silent = None
-        if self._announce is not None:
-            self.after_publish(sec, nsec)
+        self.after_output(sec, nsec)
         t_end = time.perf_counter_ns()
         self.stats.record(t_end - t_start, now - self._state_t_ns, 0)
         return True
@@ -315,7 +289,7 @@ class TorqueNode(JointStreamNode):
                     raise ParameterError(p.name, why)
             self._requested = ModelRequest.from_values(values)
         except ParameterError as exc:
-            self.live_changes["refused"] += 1
+            self.live.count("refused")
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
@@ -324,27 +298,23 @@ class TorqueNode(JointStreamNode):
             self._worker.submit(self._requested)
 
     def build(self, request: ModelRequest) -> None:
-        """Worker thread: build, then publish the bundle with one reference assignment."""
+        """Worker thread: build, state it, then hand it over with one reference assignment."""
         try:
-            b = build_bundle(request, self._next_id, self._latest.arm.nv, self._latest,
-                             std=self._std_topic)
-            if b.arm.joint_names != self.joint_names:
-                raise ValueError("its joint names differ from the running model's")
+            b = self.live.build(request)
         except (ValueError, TypeError) as exc:
-            self.live_changes["failed"] += 1
-            self.get_logger().error(f"live change not applied, config {self._bundle.config_id} "
+            self.live.count("failed")
+            self.get_logger().error(f"live change not applied, config {self.live.in_use.config_id} "
                                     f"keeps running: {exc}")
             return
-        self._next_id += 1
         self._publish_config(b, None)  # built: stated at once; applied from its first sample
-        self._latest = b
+        self.live.built(b)
         self.get_logger().info(f"config {b.config_id} built in {b.build_ms:.1f} ms "
                                f"({b.arm.kind}, body size {b.arm.body_size.label}); "
                                "applies from the next sample")
 
     # -- config message and diagnostics --------------------------------------------------
     def config_message(self, b: ModelBundle, applies_from: int | None) -> dict:
-        dt = (self._last_dt_ns or 1_000_000) * 1e-9
+        dt = self.sample_interval_s()
         s = self.settings
         return config_message(
             b.model_config,
@@ -374,42 +344,31 @@ class TorqueNode(JointStreamNode):
         return out
 
     def _publish_config(self, b: ModelBundle, applies_from: int | None) -> None:
-        """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None).
+        """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None)."""
+        self.config_pub.publish(String(data=self.live.config_text(b, applies_from)))
 
-        The text is prepared once per bundle (worker thread); applying it on the executor
-        thread is one string replacement and a publish.
-        """
-        if applies_from is None or b.config_id not in self._config_text:
-            self._config_text = {b.config_id: json.dumps(self.config_message(b, _PENDING))}
-        template = self._config_text[b.config_id]
-        text = template.replace(f'"{_PENDING}"', "null" if applies_from is None else str(applies_from))
-        if applies_from is not None:
-            self._config_json = text  # the one in force: republished with the diagnostics
-        self.config_pub.publish(String(data=text))
-
-    def _publish_diagnostics(self) -> None:
-        v.flush_suppressed(self._warned, self.get_logger(), 5.0)
-        status = self.stats.status(f"{self.get_name()}: pipeline", self.get_fully_qualified_name())
-        b = self._bundle
-        desc = b.estimator.describe((self._last_dt_ns or 1_000_000) * 1e-9, self._velocity_given)
+    def diagnostic_values(self, status) -> dict[str, str]:
+        b = self.live.in_use
+        desc = b.estimator.describe(self.sample_interval_s(), self._velocity_given)
         extra = {
             "config_id": str(b.config_id),
             "model": f"{b.arm.kind}, body size {b.arm.body_size.label}",
             "estimator": desc["method"],
             **{f"estimator.lag_{k}_s": f"{x:.6f}" for k, x in desc["lag_s"].items()},
             "estimator.noise_rad": "unknown" if desc["noise_rad"] is None else f"{desc['noise_rad']:.3g}",
-            **{f"live_changes.{k}": str(n) for k, n in self.live_changes.items()},
+            **{f"live_changes.{k}": str(n) for k, n in self.live.counts().items()},
         }
         if self.output_rate_hz > 0:
             extra.update({f"timer_skipped.{k}": str(n) for k, n in self.timer_skipped.items()})
             if self._silent in ("input_timeout", "stamps_behind"):
                 status.level = status.WARN
                 status.message = f"not publishing: {self._silent.replace('_', ' ')}"
-        extra.update(self.timing_values())
-        status.values.extend(KeyValue(key=k, value=x) for k, x in extra.items())
-        self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
-        if self._config_json:
-            self.config_pub.publish(String(data=self._config_json))
+        return extra
+
+    def after_diagnostics(self) -> None:
+        text = self.live.in_force_text  # the config in force, republished with the diagnostics
+        if text:
+            self.config_pub.publish(String(data=text))
 
     def destroy_node(self) -> None:
         worker = getattr(self, "_worker", None)
