@@ -36,7 +36,7 @@ def test_a_built_model_is_swapped_in_at_the_next_sample_and_announced_once() -> 
     live.built(b)
     assert live.current() == (b, False) and live.in_use is b and live.announcing
     assert live.first_output() is b and live.first_output() is None and not live.announcing
-    c = live.build(_request(**{"estimator": "backward"}))
+    c = live.build(_request(estimator="backward"))
     live.built(c)
     assert live.current() == (c, True)  # a new estimator: its history starts afresh
     assert live.counts() == {"applied": 2, "refused": 0, "failed": 0}
