@@ -59,6 +59,7 @@ class Variant:
     others_fifo: int = 0  # SCHED_FIFO priority of publisher, receiver, recorder (0: normal)
     pub_args: list[str] = field(default_factory=list)  # extra trajectory_publisher -p pairs
     also_topic: str = ""  # ... or this topic (e.g. joint_torques_std: its delivery is reported)
+    viewer: bool = False  # run arm_viz (markers from joint_torques) as well
 
     def cpus(self) -> tuple[set[int] | None, set[int] | None]:
         """(node CPUs, other processes' CPUs) for a pinned variant; (None, None) if not."""
@@ -130,10 +131,16 @@ def run_variant(v: Variant, movements: list[int], domain: int, work: Path,
             children.append(Child.script("bag_recorder", ["-p", f"output:={bag}"], env, logs,
                                          cpus=other_cpus, fifo=v.others_fifo))
             subscribers = 2
+        viewer = None
+        if v.viewer:
+            viewer = Child.script("arm_viz", [], env, logs, cpus=other_cpus)
+            children.append(viewer)
         if not node.wait_for(NODE_READY, 60):
             raise RuntimeError(f"{v.node} did not start:\n{node.text()[-2000:]}")
         if not rx.wait_for("receiver: matched", 60):
             raise RuntimeError(f"receiver never matched {v.node}:\n{rx.text()[-2000:]}")
+        if viewer is not None and not viewer.wait_for("arm_viz: joint_torques ->", 60):
+            raise RuntimeError(f"arm_viz did not start:\n{viewer.text()[-2000:]}")
         with Sampler({"node": node.pid, "receiver": rx.pid}) as sampler:
             for c in children[2:]:
                 sampler.add(c.name, c.pid)

@@ -14,7 +14,7 @@ from forearm_dynamics import build_model
 from forearm_dynamics.cli import export_urdf
 from forearm_dynamics.nodes.arm_markers import marker_array
 from forearm_dynamics.viz import ArmScene, MarkerMaker, TorqueColours
-from forearm_dynamics.viz.colors import VIRIDIS, library_peaks, viridis
+from forearm_dynamics.viz.colors import FULL_SCALE_NM, VIRIDIS, library_peaks, viridis
 from forearm_dynamics.viz.marker_cdr import marker_array_cdr
 
 pytestmark = pytest.mark.unit
@@ -133,10 +133,13 @@ def test_colour_scale_is_viridis_of_torque_over_the_group_full_scale():
     arm = build_model("segmented", 50)
     peaks = library_peaks()
     assert 3.0 < peaks["elbow"] < 10.0 and 0.01 < peaks["fingers"] < 0.2  # the library's
+    for g, peak in peaks.items():  # the stated table: each peak rounded up to 2 digits
+        assert float(f"{peak:.2g}") <= FULL_SCALE_NM[g] <= peak * 1.1, g
+        assert FULL_SCALE_NM[g] >= peak and float(f"{FULL_SCALE_NM[g]:.2g}") == FULL_SCALE_NM[g], g
     colours = TorqueColours(arm.joint_names, {"elbow": 2.0})
     tau = np.zeros(arm.nv)
     e, w = arm.joint_names.index("elbow_flexion"), arm.joint_names.index("wrist_flexion")
-    tau[e], tau[w] = -1.0, 10 * peaks["wrist"]
+    tau[e], tau[w] = -1.0, 10 * FULL_SCALE_NM["wrist"]
     frac = colours.fraction(tau)
     assert frac[e] == pytest.approx(0.5) and frac[w] == 1.0 and frac[0 if e else 1] == 0.0
     np.testing.assert_allclose(colours.rgb(tau)[w], VIRIDIS[-1])

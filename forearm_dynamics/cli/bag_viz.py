@@ -22,14 +22,19 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import struct
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
+from mcap.exceptions import McapError
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
+from zstandard import ZstdError
 
 from ..bag import BagWriter, TopicQos, open_bag
+from ..bag.augment import NotIndexed, augment
 from ..codec.jointstate import TorqueReader
 from ..errors import BagError, ForeignBag
 from ..exit_codes import OK
@@ -72,7 +77,10 @@ class _Models:
                                                  if k not in ("config_id", "applies_from_stamp_ns",
                                                               "build_ms")}, sort_keys=True)
         if key not in self._built:
-            choice = model_from_config(cfg)
+            try:
+                choice = model_from_config(cfg)
+            except ValueError as exc:
+                raise ForeignBag(f"{CONFIG} names a model that cannot be built ({exc})") from None
             self.warnings += choice.warnings
             arm = choice.arm
             scene = ArmScene(arm)
@@ -80,6 +88,78 @@ class _Models:
                                 arrow_scale=self.args.arrow_scale)
             self._built[key] = (maker, arm.to_urdf())
         return (key, *self._built[key])
+
+
+class _Drawer:
+    """Chooses the joint_torques to draw (the first at or after each 1/rate of log time) and
+    makes their MarkerArray (and a robot_description when the model changes)."""
+
+    def __init__(self, args, models: _Models, torque_channel: int, source: str):
+        self.models, self.channel, self.source = models, torque_channel, source
+        self.period = round(1e9 / args.rate_hz)
+        self.next_ns: int | None = None
+        self.current: str | None = None
+        self.reader = TorqueReader()
+        self.counts = [0, 0]
+
+    def reset(self) -> None:
+        self.next_ns, self.current, self.counts = None, None, [0, 0]
+
+    def due(self, log_time: int) -> bool:
+        return self.next_ns is None or log_time >= self.next_ns
+
+    def draw(self, log_time: int, data: bytes) -> list[tuple[int, int, bytes]]:
+        """[(0 markers | 1 description, log time, bytes)] for the torque message `data`."""
+        self.reader.keep(data)
+        stamp = self.reader.stamp()
+        key, maker, urdf = self.models.at(stamp)
+        out = []
+        if key != self.current:
+            out.append((1, log_time, serialize_message(String(data=urdf))))
+        try:
+            _, q, tau = self.reader.decode(maker.scene.joint_names)
+            frame = maker.frame(q, tau)
+        except ValueError as exc:
+            raise ForeignBag(f"{self.source}: joint_torques at stamp {stamp}: {exc}") from None
+        out.append((0, log_time, marker_array_cdr(frame, maker.scene.root_frame, stamp,
+                                                  key != self.current)))
+        self.current = key
+        self.next_ns = log_time + self.period
+        for k, *_ in out:
+            self.counts[k] += 1
+        return out
+
+    def visit(self, view, _channels) -> list[tuple[int, int, bytes]]:
+        out = []
+        index = view.index.get(self.channel)
+        if index is None or not len(index):
+            return out
+        index = index[np.argsort(index[:, 0], kind="stable")]
+        times = index[:, 0].astype(np.int64)
+        k = 0
+        while k < len(times):
+            if not self.due(int(times[k])):  # jump to the next message that is due
+                k += int(np.searchsorted(times[k:], self.next_ns, side="left"))
+                continue
+            out += self.draw(int(times[k]), view.payload(int(index[k, 1])))
+            k += 1
+        return out
+
+
+def _copy_by_message(bag, info, path: Path, topics, drawer: _Drawer) -> None:
+    """The general path (a bag without message indexes): every message read and written."""
+    with BagWriter(path, overwrite=True) as w:
+        out_ch = {}
+        for ch in info.channels.values():
+            sid = w.add_schema(ch.schema_name, ch.schema_encoding, ch.schema_data)
+            out_ch[ch.id] = w.add_channel(ch.topic, sid, ch.schema_name, ch.metadata,
+                                          ch.message_encoding)
+        added = [w.add_topic(t, type_name, qos) for t, type_name, qos in topics]
+        for ch, msg in bag.messages():
+            w.write(out_ch[ch.id], msg.data, msg.log_time, msg.publish_time)
+            if ch.id == drawer.channel and drawer.due(msg.log_time):
+                for k, log_time, data in drawer.draw(msg.log_time, bytes(msg.data)):
+                    w.write(added[k], data, log_time)
 
 
 def bag_viz(args) -> dict:
@@ -107,50 +187,26 @@ def bag_viz(args) -> dict:
     if args.output.exists() and not args.overwrite:
         raise ValueError(f"{args.output} exists (give --overwrite to replace it)")
     tmp = args.output.with_name(args.output.name + ".part")
-    period = round(1e9 / args.rate_hz)
-    reader = TorqueReader()
-    written = {"copied": 0, "arm_markers": 0, "robot_description": 0}
+    drawer = _Drawer(args, models, torques.id, f"{args.input}")
+    topics = [(base + "arm_markers", "visualization_msgs/msg/MarkerArray", TopicQos(depth=10)),
+              (base + "robot_description", "std_msgs/msg/String",
+               TopicQos(depth=1, durability="transient_local"))]
     t_start = time.perf_counter()
     try:
-        with BagWriter(tmp, overwrite=True) as w:
-            out_ch = {}
-            for ch in info.channels.values():
-                sid = w.add_schema(ch.schema_name, ch.schema_encoding, ch.schema_data)
-                out_ch[ch.id] = w.add_channel(ch.topic, sid, ch.schema_name, ch.metadata,
-                                              ch.message_encoding)
-            markers_ch = w.add_topic(base + "arm_markers", "visualization_msgs/msg/MarkerArray",
-                                     TopicQos(depth=10))
-            desc_ch = w.add_topic(base + "robot_description", "std_msgs/msg/String",
-                                  TopicQos(depth=1, durability="transient_local"))
-            next_ns, current = None, None
-            for ch, msg in bag.messages():
-                w.write(out_ch[ch.id], msg.data, msg.log_time, msg.publish_time)
-                written["copied"] += 1
-                if ch.id != torques.id:
-                    continue
-                reader.keep(msg.data)
-                stamp = reader.stamp()
-                if next_ns is not None and stamp < next_ns:
-                    continue
-                key, maker, urdf = models.at(stamp)
-                if key != current:
-                    w.write(desc_ch, serialize_message(String(data=urdf)), msg.log_time)
-                    written["robot_description"] += 1
-                try:
-                    _, q, tau = reader.decode(maker.scene.joint_names)
-                    frame = maker.frame(q, tau)
-                except ValueError as exc:
-                    raise ForeignBag(f"{args.input}: joint_torques at stamp {stamp}: "
-                                   f"{exc}") from None
-                w.write(markers_ch, marker_array_cdr(frame, maker.scene.root_frame, stamp,
-                                                     key != current), msg.log_time)
-                written["arm_markers"] += 1
-                current = key
-                next_ns = stamp + period
+        try:
+            augment(args.input, tmp, topics, drawer.visit, overwrite=True)
+            written = {"path": "chunks"}
+        except (NotIndexed, McapError, ZstdError, struct.error, EOFError):
+            # no indexes, or damage the container reader can tell apart: the general path
+            drawer.reset()
+            _copy_by_message(bag, info, tmp, topics, drawer)
+            written = {"path": "messages"}
         tmp.replace(args.output)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    written.update({"copied": info.message_count, "arm_markers": drawer.counts[0],
+                    "robot_description": drawer.counts[1]})
     written["seconds"] = time.perf_counter() - t_start
     written["bag_seconds"] = (info.end_ns - info.start_ns) / 1e9
     written["warnings"] = models.warnings
@@ -166,7 +222,8 @@ def main(argv: list[str] | None = None) -> int:
     for w in out["warnings"]:
         print(f"{PROG}: warning: {w}", file=sys.stderr)
     speed = out["bag_seconds"] / out["seconds"] if out["seconds"] > 0 else float("inf")
-    print(f"{PROG}: wrote {args.output}: {out['copied']} messages copied, {out['arm_markers']} "
+    print(f"{PROG}: wrote {args.output}: {out['copied']} messages copied (by {out['path']}), "
+          f"{out['arm_markers']} "
           f"arm_markers, {out['robot_description']} robot_description; {out['seconds']:.2f} s for "
           f"{out['bag_seconds']:.1f} s of bag ({speed:.0f}x real time, load "
           f"{os.getloadavg()[0]:.1f})", file=sys.stderr)

@@ -1,7 +1,9 @@
 """visualization_msgs/MarkerArray as CDR bytes (little endian, as rmw and rosbag2 write it).
 
-bag_viz writes tens of MarkerArrays per second of bag; building rclpy message objects and
-serialize_message costs ~10 ms per array on this machine, this ~0.3 ms (benchmarks/viz.py).
+arm_viz and bag_viz write tens of MarkerArrays per second; building rclpy message objects
+and serialize_message cost ~10 ms per array on this (loaded) machine. Here the bytes of one
+array shape are made once (a template, every number zero) and each array is a copy with its
+numbers written in by numpy (tens of µs).
 The bytes are checked equal to rclpy's serialize_message in test/test_viz_markers.py.
 Layout: XCDR1 (the 4-byte encapsulation header, then every primitive aligned to its size,
 counted from the end of that header); strings as uint32 length with the NUL, then the bytes.
@@ -41,22 +43,28 @@ class _Buf:
 
 
 def _marker(buf: _Buf, sec: int, nsec: int, frame: bytes, ns: bytes, kind: int, action: int,
-            pose: tuple, scale: tuple, rgba: tuple, points: np.ndarray | None) -> None:
+            pose: tuple, scale: tuple, rgba: tuple, points: np.ndarray | None) -> tuple[int, ...]:
+    """Appends one Marker; returns where its stamp, pose (+ scale), colour and points are."""
     buf.align(4)
+    at_stamp = len(buf.b)
     buf.b += struct.pack("<iI", sec, nsec)
     buf.string(frame)
     buf.string(ns)
     buf.align(4)
     buf.b += struct.pack("<iii", 0, kind, action)
     buf.align(8)
+    at_pose = len(buf.b)
     buf.b += struct.pack("<10d", *pose, *scale)
+    at_color = len(buf.b)
     buf.b += struct.pack("<4f", *rgba)  # offset is a multiple of 8 here
     buf.b += struct.pack("<iI?", 0, 0, False)  # lifetime (0 = forever), frame_locked
+    at_points = -1
     if points is None:
         buf.u32(0)
     else:
         buf.u32(len(points))
         buf.align(8)
+        at_points = len(buf.b)
         buf.b += np.ascontiguousarray(points, "<f8").tobytes()
     buf.u32(0)  # colors
     buf.string(b"")  # texture_resource
@@ -71,30 +79,76 @@ def _marker(buf: _Buf, sec: int, nsec: int, frame: bytes, ns: bytes, kind: int, 
     buf.string(b"")  # mesh_file.filename
     buf.u32(0)  # mesh_file.data
     buf.b += b"\x00"  # mesh_use_embedded_materials
+    return at_stamp, at_pose, at_color, at_points
 
 
 _ZERO_POSE = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 
 
+class _Template:
+    """The bytes of one MarkerArray shape (names, types, frame, arrows) with every number
+    zero, and where the numbers go: each array is then a copy with numpy writes into it.
+    The buffer starts 4 bytes early, so the CDR payload's 8-byte alignment is the buffer's
+    and the doubles can be written through one float64 view."""
+
+    def __init__(self, frame: MarkerFrame, frame_id: str, delete_all: bool):
+        fid = frame_id.encode()
+        buf = _Buf()
+        buf.u32(len(frame.ns) + len(frame.arrow_ns) + int(delete_all))
+        stamps, poses, colors, points = [], [], [], []
+        if delete_all:
+            stamps.append(_marker(buf, 0, 0, fid, b"", 0, DELETEALL, _ZERO_POSE, (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0, 0.0), None)[0])
+        for i, ns in enumerate(frame.ns):
+            o = _marker(buf, 0, 0, fid, ns.encode(), int(frame.types[i]), ADD, _ZERO_POSE,
+                        (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0), None)
+            stamps.append(o[0])
+            poses.append(o[1])
+            colors.append(o[2])
+        for ns in frame.arrow_ns:
+            o = _marker(buf, 0, 0, fid, ns.encode(), ARROW, ADD, _ZERO_POSE, ARROW_SCALE,
+                        (0.0, 0.0, 0.0, 0.0), np.zeros((2, 3)))
+            stamps.append(o[0])
+            colors.append(o[2])
+            points.append(o[3])
+        self.size = len(buf.b)
+        raw = np.zeros(4 + self.size + (-(4 + self.size)) % 8, np.uint8)
+        raw[4:4 + self.size] = np.frombuffer(bytes(buf.b), np.uint8)
+        self.raw = raw
+        shift = 4
+        self.stamp = (np.array(stamps) + shift) // 4
+        self.pose = (np.array(poses, int) + shift) // 8
+        self.color = (np.array(colors) + shift) // 4
+        self.n_shapes = len(frame.ns)
+        self.points = (np.array(points, int) + shift) // 8
+
+    def encode(self, frame: MarkerFrame, stamp_ns: int) -> bytes:
+        b = self.raw.copy()
+        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        i32, u32, f32, f64 = b.view("<i4"), b.view("<u4"), b.view("<f4"), b.view("<f8")
+        i32[self.stamp] = sec
+        u32[self.stamp + 1] = nsec
+        n = self.n_shapes
+        if n:
+            f64[self.pose[:, None] + np.arange(10)] = np.column_stack(
+                [frame.positions, frame.orientations, frame.scales])
+            f32[self.color[:n, None] + np.arange(4)] = frame.rgba
+        if len(self.points):
+            f64[self.points[:, None] + np.arange(6)] = frame.arrows.reshape(-1, 6)
+            f32[self.color[n:, None] + np.arange(4)] = frame.arrow_rgba
+        return b[4:4 + self.size].tobytes()
+
+
+_TEMPLATES: dict[tuple, _Template] = {}
+
+
 def marker_array_cdr(frame: MarkerFrame, frame_id: str, stamp_ns: int,
                      delete_all: bool = False) -> bytes:
-    """The serialized MarkerArray of nodes/arm_markers.marker_array (same bytes)."""
-    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
-    fid = frame_id.encode()
-    buf = _Buf()
-    n = len(frame.ns) + len(frame.arrow_ns) + int(delete_all)
-    buf.u32(n)
-    if delete_all:
-        _marker(buf, sec, nsec, fid, b"", 0, DELETEALL, _ZERO_POSE, (0.0, 0.0, 0.0),
-                (0.0, 0.0, 0.0, 0.0), None)
-    poses = np.column_stack([frame.positions, frame.orientations]).tolist()
-    scales, rgba, types = frame.scales.tolist(), frame.rgba.tolist(), frame.types.tolist()
-    for i, ns in enumerate(frame.ns):
-        _marker(buf, sec, nsec, fid, ns.encode(), types[i], ADD, poses[i], scales[i], rgba[i],
-                None)
-    if frame.arrow_ns:
-        arrow_rgba = frame.arrow_rgba.tolist()
-        for i, ns in enumerate(frame.arrow_ns):
-            _marker(buf, sec, nsec, fid, ns.encode(), ARROW, ADD, _ZERO_POSE, ARROW_SCALE,
-                    arrow_rgba[i], frame.arrows[i])
-    return bytes(buf.b)
+    """The serialized MarkerArray of nodes/arm_markers.marker_array (the same message)."""
+    key = (frame.ns, tuple(frame.types.tolist()), frame.arrow_ns, frame_id, delete_all)
+    t = _TEMPLATES.get(key)
+    if t is None:
+        if len(_TEMPLATES) > 16:  # a few models in one process: keep the cache small
+            _TEMPLATES.clear()
+        t = _TEMPLATES[key] = _Template(frame, frame_id, delete_all)
+    return t.encode(frame, stamp_ns)

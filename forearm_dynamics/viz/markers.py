@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+import pinocchio as pin
 
 from .colors import TorqueColours
 from .scene import ArmScene
@@ -41,6 +41,14 @@ class MarkerFrame:
     arrow_ns: tuple[str, ...] = ()
     arrows: np.ndarray | None = None  # (m, 2, 3): start, end (root frame)
     arrow_rgba: np.ndarray | None = None  # (m, 4)
+
+
+def quaternions(r: np.ndarray) -> np.ndarray:
+    """(n, 4) unit quaternions x, y, z, w (w >= 0) of proper rotation matrices (n, 3, 3)
+    (Pinocchio's Eigen conversion, one call per matrix: cheaper than numpy for ~20)."""
+    q = np.array([pin.Quaternion(m).coeffs() for m in r])  # x, y, z, w
+    q[q[:, 3] < 0] *= -1.0
+    return q
 
 
 def _scale(kind: str, size: tuple[float, ...]) -> np.ndarray:
@@ -75,8 +83,7 @@ class MarkerMaker:
             raise ValueError(f"torques must be {self._n} finite numbers in joint_names order, "
                              f"got shape {tau.shape}")
         pos, rot = self.scene.poses(q)
-        quat = Rotation.from_matrix(rot).as_quat()  # x, y, z, w
-        quat[quat[:, 3] < 0] *= -1.0
+        quat = quaternions(rot)
         joint_rgb = self.colours.rgb(tau)
         rgb = np.where((self._joint < 0)[:, None], self._fixed_rgb, joint_rgb[self._joint])
         rgba = np.column_stack([rgb, np.full(len(rgb), self.alpha)])
