@@ -51,9 +51,11 @@ class Sim:
     """One arm_sim process and a peer that commands it and collects what it publishes."""
 
     def __init__(self, *params: str):
+        # a domain of its own: the module's lockstep node runs while the other tests run
+        domain = rosproc.test_domain(102, 214)
         args = [a for p in ("diagnostics_period:=0.2", *params) for a in ("-p", p)]
-        self.proc = rosproc.start("arm_sim", *args)
-        self.peer = rosproc.Peer(f"arm_sim_test_{next(_PEERS)}")
+        self.proc = rosproc.start("arm_sim", *args, domain=domain)
+        self.peer = rosproc.Peer(f"arm_sim_test_{next(_PEERS)}", domain=domain)
         node = self.peer.node
         self.pub = node.create_publisher(JointState, "joint_commands", stream_qos(1000))
         self.states: list[JointState] = []
@@ -201,3 +203,39 @@ def test_unstable_damping_is_refused_with_one_line() -> None:
     lines = [ln for ln in out.splitlines() if "invalid parameter" in ln]
     assert len(lines) == 1 and "'damping'" in lines[0] and "_dip_flexion" in lines[0], out
     assert "Traceback" not in out
+
+
+def test_parameters_reach_the_simulation() -> None:
+    """Model parameters (torque_node's), initial_posture.<joint>, damping.<joint> and method
+    are what the simulation runs with: 50 lockstep steps equal the core's, bit for bit."""
+    s = Sim("lockstep:=true", "model:=anatomical", "body_size:=95", "side:=left",
+            "payload_mass:=0.5", "method:=semi_implicit_euler", "initial_posture.elbow_flexion:=1.0",
+            "damping.elbow_flexion:=0.01", "joint_limits:=false")
+    try:
+        s.wait(lambda: s.pub.get_subscription_count() > 0 and s.config, what="discovery and config")
+        assert s.config["model"] == "anatomical" and s.config["side"] == "left"
+        assert s.config["simulation"]["damping"]["elbow_flexion"] == 0.01
+        t0 = s.config["t0_ns"]
+
+        def answers() -> list:  # the initial state (stamp t0) may or may not have come
+            return [m for m in s.states if stamp_ns(m) > t0]
+
+        torques = np.random.default_rng(2).uniform(-0.2, 0.2, (50, 3))
+        for k, tau in enumerate(torques):
+            s.pub.publish(command(DRIVEN, tau))
+            s.wait(lambda k=k: len(answers()) >= k + 1, 10.0, f"the answer to command {k}")
+        got = answers()
+        arm = build_model("anatomical", 95, side="left", payload_mass=0.5)
+        q0 = np.array(list(s.config["initial_posture"].values()))
+        assert q0[0] == 1.0
+        sim = ArmSimulator(arm, SimSettings(method="semi_implicit_euler", joint_limits=False,
+                                            damping={"elbow_flexion": 0.01}), q0)
+        assert [stamp_ns(m) for m in got] == [t0 + (k + 1) * MS for k in range(len(torques))]
+        idx = [arm.joint_names.index(n) for n in DRIVEN]
+        for k, tau in enumerate(torques):
+            full = np.zeros(20)
+            full[idx] = tau
+            sim.step(full)
+            assert np.array_equal(np.asarray(got[k].position), sim.q), k
+    finally:
+        s.close()
