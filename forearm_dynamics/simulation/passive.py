@@ -137,15 +137,19 @@ class PassiveJoints:
     limit_stiffness: np.ndarray | None  # (nv,) N·m/rad; None = no limits
     limit_damping: np.ndarray | None
 
+    def __post_init__(self):
+        object.__setattr__(self, "_neg_damping", -self.damping)
+
     def torque(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """-c·qd, plus beyond a limit -k·(q - limit) - c_l·qd, never pulling into the limit."""
-        tau = -self.damping * qd
+        """-c·qd, plus beyond a limit -k·(q - limit) - c_l·qd, never pulling into the limit.
+
+        Called at every solver stage (4 per RK4 step), so the common case (no joint beyond
+        its range) is three numpy calls: the penetration is q - clip(q, lower, upper)."""
+        tau = self._neg_damping * qd
         if self.limit_stiffness is None:
             return tau
-        over = q - self.upper
-        under = q - self.lower
-        if np.any(over > 0.0) or np.any(under < 0.0):
-            pen = np.where(over > 0.0, over, np.where(under < 0.0, under, 0.0))
+        pen = q - np.clip(q, self.lower, self.upper)
+        if pen.any():
             lim = -self.limit_stiffness * pen - self.limit_damping * qd * (pen != 0.0)
             # pushing out of the limit only: sign opposite to the penetration (or zero)
             lim = np.where(pen > 0.0, np.minimum(lim, 0.0), np.maximum(lim, 0.0))
