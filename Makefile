@@ -78,7 +78,7 @@ reference: setup
 	$(VENV)/bin/make_reference
 
 reproduce: setup
-	$(VENV)/bin/reproduce_paper --out results/paper --readme README.md
+	$(VENV)/bin/reproduce_paper --out results/paper --readme README.md --docs docs/paper.md
 
 # Offline estimator benchmark (no ROS, a few minutes): the `estimation` key of
 # benchmarks/results.json and benchmarks/estimation.png

@@ -160,3 +160,24 @@ def test_results_carry_every_review_section(results):
     assert len(results["lomo"]["variants"]["oblique"]["folds"]) == 13
     assert set(results["body_proportions"]) == set(BODIES)
     assert rv["axes"]["wrench_on_prosup_axis_minus_generalised_max_nm"] < 1e-9
+
+
+def test_docs_paper_is_generated_from_results(results):
+    from forearm_dynamics.analysis.paper_doc import paper_markdown
+
+    doc = (ROOT / "docs" / "paper.md").read_text(encoding="utf-8")
+    assert doc == paper_markdown(results)
+    assert "**Verdict.**" in doc and "**The headline uses reading 1**" in doc
+
+
+def test_thumb_base_cases_move_the_thumb():
+    from forearm_dynamics.analysis.sensitivity import _hand, cases
+
+    desc = load_description()
+    thumb = [c for c in cases() if c.get("hand", "").startswith("thumb")]
+    assert {c["hand"] for c in thumb} == {"thumb_cmc_position", "thumb_cmc_palmar", "thumb_angle"}
+    for c in thumb:
+        h = _hand(desc, c["hand"], c["k"]).hand
+        moved = (not np.allclose(h.thumb_cmc_fraction, desc.hand.thumb_cmc_fraction)
+                 or h.thumb_angle != desc.hand.thumb_angle)
+        assert moved, c["case"]

@@ -115,7 +115,7 @@ def lomo_table(r: dict) -> str:
     lo = r["lomo"]
     st = lo["statistics"]
     lines = [("| placement | all-65 fit from neutral: objective | pro/sup NRMSE held out (13 folds) mean / "
-             "median | same movements, all-65 fit | held out − all-65 [CI] | folds where held out is "
+             "median | same movements, all-65 fit | held out − all-65 [CI] | movements where held out is "
              "worse |"), "|---|---|---|---|---|---|"]
     for n, v in lo["variants"].items():
         d = st["held_out_vs_all_65"][n]
@@ -189,11 +189,6 @@ def dof_table(r: dict) -> str:
     return "\n".join(lines)
 
 
-REVIEW_TABLES = {"paper-axes": axes_table, "paper-statistics": stats_headline_table,
-                 "paper-pairs": pairs_table, "paper-windows": windows_table,
-                 "paper-lomo": lomo_table, "paper-bodies": bodies_table,
-                 "paper-size-trend": trend_table, "paper-dofs": dof_table}
-
 
 def _summ(r, name, size="p50", group="pro_sup", metric="nrmse"):
     return r["models"][name][size]["summary"][group][metric]
@@ -209,6 +204,20 @@ def _diff(p: dict) -> str:
             f"{_ci(p)}, {p['wins_a']}/{p['n']} wins")
 
 
+def size_trend_grows(r: dict) -> bool:
+    """Does any wrist/finger error of solid or oblique grow p5 -> p95 (CI above 0)?"""
+    t = r["body_size_trend"]["models"]
+    return any(t[n][g]["p95_minus_p5_elbow_moving"]["ci95_mean_difference"][0] > 0
+               for n in ("solid", "oblique") for g in ("wrist", "fingers"))
+
+
+def elbow_effect_small(r: dict) -> bool:
+    """Is the architecture's effect on the elbow unresolved or smaller than on any hand group?"""
+    eff = r["review"]["dof_groups"]["architecture_effect"]
+    hand_min = min(eff[g]["mean_difference"] for g in ("wrist", "thumb", "fingers"))
+    return eff["elbow"]["ci95_mean_difference"][0] < 0 or eff["elbow"]["mean_difference"] < hand_min
+
+
 def claims_table(r: dict) -> str:
     """The paper's claims, what we find (with the statistics) and the evidence of each row."""
     el = r["elbow"]
@@ -221,6 +230,8 @@ def claims_table(r: dict) -> str:
     n_ps = r["review"]["cases"]["generalised/whole"]["summary"][so]["prosup_nrmse"]["n"]
     tr = r["body_size_trend"]["models"]
     ranked = sorted(eff, key=lambda g: -eff[g]["mean_difference"])
+    grow_word = "**Partly.**" if size_trend_grows(r) else "**No.**"
+    elbow_word = "**The elbow: no**" if elbow_effect_small(r) else "The elbow: yes"
     u = lambda a, b: _pair(r, a, b, reading="ulna_axis")
     best_u = min(s["prosup_nrmse"]["mean"] for s in _case(r, "ulna_axis", "whole")["summary"].values())
     t = lambda a, b: _pair(r, a, b, window="transition")
@@ -254,7 +265,7 @@ def claims_table(r: dict) -> str:
           f"fitted split (oblique axis) is {r['variants'][ob]['placement']['split']:.3f}"),
          "placements table; pairs table"),
         ("Errors grow with body size (at the wrist and fingers, elbow moving): numerical integration",
-         (f"**No.** Against OpenSim at each size, p95 − p5 in elbow-moving movements: `oblique` wrist "
+         (f"{grow_word} Against OpenSim at each size, p95 − p5 in elbow-moving movements: `oblique` wrist "
           f"{pc(tr[ob]['wrist']['p95_minus_p5_elbow_moving']['mean_difference'])} "
           f"{_ci(tr[ob]['wrist']['p95_minus_p5_elbow_moving'])}, fingers "
           f"{pc(tr[ob]['fingers']['p95_minus_p5_elbow_moving']['mean_difference'])} "
@@ -265,7 +276,7 @@ def claims_table(r: dict) -> str:
          "size-trend table" + ("; RK4 table" if "rk4" in r else "")),
         ("Forearm architecture affects pro/sup and the elbow most",
          (f"Pro/sup, yes: solid − `oblique` {pc(eff['pro_sup']['mean_difference'])} "
-          f"{_ci(eff['pro_sup'])} points. **The elbow: no** — "
+          f"{_ci(eff['pro_sup'])} points. {elbow_word} — "
           f"{pc(eff['elbow']['mean_difference'])} {_ci(eff['elbow'])} points (ranking of the effect: "
           f"{', '.join(ranked)}): its error is the uniform cylinder's COM, not the pro/sup joint "
           f"(elbow RMSE solid {nm(el['rmse']['solid_uniform']['elbow_rmse_mean'])} N·m, mass-matched "
@@ -286,3 +297,58 @@ def _rk4_sentence(r: dict) -> str:
     if not k:
         return "The integration error itself: not measured in this run."
     return k["summary_sentence"]
+
+
+def rk4_table(r: dict) -> str:
+    k = r["rk4"]
+    lines = [("| model | DOF group | torque NRMSE from the RK4 drift, p5 / p50 / p95 (%) | max drift "
+              "p5 / p50 / p95 (rad) | p95 − p5 [CI] | p95 worse / N |"), "|---|---|---|---|---|---|"]
+    for n, rows in k["groups"].items():
+        for g, row in rows.items():
+            d = row["p95_minus_p5_torque_nrmse"]
+            nr = " / ".join(f"{100 * row[f'p{s}_torque_nrmse_mean']:.2g}" for s in (5, 50, 95))
+            dr = " / ".join(f"{row[f'p{s}_drift_max_rad']:.1e}" for s in (5, 50, 95))
+            lo, hi = (100 * x for x in d["ci95_mean_difference"])
+            lines.append(f"| `{n}` | {g} | {nr} | {dr} | {100 * d['mean_difference']:.2g} "
+                         f"[{lo:.2g}, {hi:.2g}] | {d['wins_b']} / {d['n']} |")
+    lines += ["", (f"RK4, dt = {1000 * k['dt']:g} ms, forearm_dynamics.simulation.simulate, driven by "
+                   "each model's own inverse-dynamics torques (evaluated at every stage), no damping or "
+                   f"limits, {len(k['movements'])} movements (elbow moving, and elbow at 90°). Torque "
+                   "NRMSE = RMSE of "
+                   "ID(drifted state) − ID(movement) / the movement's torque peak-to-peak. "
+                   + k["summary_sentence"])]
+    return "\n".join(lines)
+
+
+def moving_axis_table(r: dict) -> str:
+    m = r["moving_axis"]
+    lines = [("| model | pro/sup NRMSE mean / median vs MoBL (fixed axis) | vs the moving-axis "
+              "reference | global, moving axis |"), "|---|---|---|---|"]
+    fixed = _case(r, "generalised", "whole")["summary"]
+    for n, row in m["models"].items():
+        lines.append(f"| `{n}` | {_ms(fixed[n]['prosup_nrmse'])} | {_ms(row['prosup_nrmse'])} | "
+                     f"{pc(row['prosup_nrmse_global']['mean'])} |")
+    for n, row in m["refit"].items():
+        lines.append(f"| `{n}` refitted to the moving-axis reference | | {_ms(row['prosup_nrmse'])} | |")
+    lines += ["", "| comparison (A vs B) | A − B [95 % CI] | A wins / N | Wilcoxon p |", "|---|---|---|---|"]
+    for p in m["pairs"]:
+        lines.append(f"| `{p['a']}` vs `{p['b']}` | {pc(p['mean_difference'])} {_ci(p)} | "
+                     f"{p['wins_a']} / {p['n']} | {_p(p['wilcoxon_p'])} |")
+    lines += ["", (f"%, {m['rate_hz']:.0f} Hz samples, 50th percentile. The reference: MoBL with its "
+                   f"radioulnar CustomJoint's axis tilting {m['tilt_total_deg']:g}° and translating "
+                   f"{m['translation_total_mm']:g} mm along the ulna over the pro/sup range (OpenSim "
+                   f"LinearFunctions of pro_sup). Tilt: {m['sources']['tilt']}. Translation: "
+                   f"{m['sources']['translation']}.")]
+    return "\n".join(lines)
+
+
+def _optional(key: str, fn):
+    return lambda r: fn(r) if key in r else "not computed in this run"
+
+
+REVIEW_TABLES = {"paper-axes": axes_table, "paper-statistics": stats_headline_table,
+                 "paper-pairs": pairs_table, "paper-windows": windows_table,
+                 "paper-lomo": lomo_table, "paper-bodies": bodies_table,
+                 "paper-size-trend": trend_table, "paper-dofs": dof_table,
+                 "paper-rk4": _optional("rk4", rk4_table),
+                 "paper-moving-axis": _optional("moving_axis", moving_axis_table)}

@@ -1,6 +1,8 @@
 """What a reviewer asks of the comparison, computed in one place for reproduce_paper:
 both torque readings and scoring windows with statistics (review), leave-one-movement-out
-fits and bodies that are not scaled copies (heldout). Expensive parts live in the FitCache.
+fits and bodies that are not scaled copies (heldout), the RK4 integration error per body
+size (integration) and the moving-axis reference (moving_axis). Expensive parts live in
+the FitCache.
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ from .axes import LINES, axis_angle_deg
 from .comparison import Trials, filtered_torques, reference_filtered
 from .errors import global_range, movement_errors, summarize
 from .heldout import body_proportions, lomo
+from .integration import rk4_trend
+from .moving_axis import moving_axis_comparison
 from .placement import VARIANTS, FitCache, Scorer
 from .review import PRO_SUP, review, ulna_reference
 from .statistics import clusters_of, paired
@@ -105,7 +109,7 @@ def lomo_statistics(lo: dict) -> dict:
 
 
 def robustness(ref, overrides: dict, cache: FitCache, fit_rate_hz: float, tick=None) -> dict:
-    """results.json sections: review, lomo, body_proportions, body_size_trend."""
+    """results.json sections: review, lomo, body_proportions, body_size_trend, rk4, moving_axis."""
     out = {"review": _review(ref, overrides, cache)}
     if tick:
         tick("review")
@@ -117,4 +121,7 @@ def robustness(ref, overrides: dict, cache: FitCache, fit_rate_hz: float, tick=N
     out["body_proportions"] = body_proportions(overrides, cache, 200.0,
                                                tick=(lambda: tick("bodies")) if tick else None)
     out["body_size_trend"] = body_size_trend(ref, overrides, cache)
+    out["rk4"] = rk4_trend(cache, tick=(lambda: tick("RK4 round trips")) if tick else None)
+    out["moving_axis"] = moving_axis_comparison(
+        overrides, cache, fit_rate_hz, tick=(lambda: tick("moving-axis reference")) if tick else None)
     return out

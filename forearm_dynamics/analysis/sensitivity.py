@@ -1,7 +1,8 @@
 """How much the headline numbers move with the assumptions behind them.
 
 Cases: the three readings of "stop at 45 % of the range" (movements.STOP_RULES), the
-assumed hand geometry (prism thickness, digit radii, MCP positions) at 0.8x and 1.2x, and
+assumed hand geometry (prism thickness, digit radii, MCP positions, the thumb base's CMC
+position) at 0.8x and 1.2x, the CMC moved palmar/dorsal, the thumb angle +-10 deg, and
 each fitted placement coordinate moved by 1 mm. A case that changes the movements or the
 hand changes the anatomical model's torques too: those references are computed with
 Pinocchio's anatomical model (which matches the OpenSim reference to 1e-11 N·m,
@@ -25,6 +26,8 @@ from .placement import HEADLINE, VARIANTS, FitCache, Scorer
 
 SENSITIVITY_RATE_HZ = 200.0
 HAND_FACTORS = (0.8, 1.2)
+THUMB_PALMAR = (-0.25, 0.25)  # the CMC moved dorsal / palmar by a quarter of the palm thickness
+THUMB_ANGLE_STEPS = (-10.0, 10.0)  # deg added to config/model.yaml's thumb_angle_deg
 MM = 1e-3
 VERSION = 2  # part of the cache key: bump when what a case computes changes
 
@@ -38,6 +41,12 @@ def _hand(desc: ModelDescription, what: str, k: float) -> ModelDescription:
                     thumb_radius_fraction=h.thumb_radius_fraction * k)
     elif what == "mcp_positions":
         h = replace(h, mcp_x_fraction={f: x * k for f, x in h.mcp_x_fraction.items()})
+    elif what == "thumb_cmc_position":  # radial and distal position of the CMC, scaled
+        h = replace(h, thumb_cmc_fraction=h.thumb_cmc_fraction * np.array([k, k, 1.0]))
+    elif what == "thumb_cmc_palmar":  # moved palmar (+) or dorsal (-) by k x the palm thickness
+        h = replace(h, thumb_cmc_fraction=h.thumb_cmc_fraction + np.array([0.0, 0.0, -k]))
+    elif what == "thumb_angle":  # rest direction in the palm plane, k degrees added
+        h = replace(h, thumb_angle=h.thumb_angle + np.deg2rad(k))
     else:
         raise ValueError(what)
     return replace(desc, hand=h)
@@ -69,9 +78,14 @@ def cases() -> list[dict]:
     out = [{"case": "baseline", "group": "baseline"}]
     out += [{"case": f"stop rule: {rule}", "group": "stop_rule", "stop_rule": rule}
             for rule in STOP_RULES if rule != default_stop_rule()]
-    for what in ("prism_thickness", "digit_radii", "mcp_positions"):
+    for what in ("prism_thickness", "digit_radii", "mcp_positions", "thumb_cmc_position"):
         out += [{"case": f"{what.replace('_', ' ')} x{k:g}", "group": "hand", "hand": what, "k": k}
                 for k in HAND_FACTORS]
+    out += [{"case": f"thumb CMC {'palmar' if k > 0 else 'dorsal'} {abs(k):g} x palm thickness",
+             "group": "hand", "hand": "thumb_cmc_palmar", "k": k} for k in THUMB_PALMAR]
+    base = float(np.rad2deg(load_description().hand.thumb_angle))
+    out += [{"case": f"thumb angle {base + k:g} deg (assumed {base:g})",
+             "group": "hand", "hand": "thumb_angle", "k": k} for k in THUMB_ANGLE_STEPS]
     return out
 
 

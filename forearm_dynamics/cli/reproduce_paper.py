@@ -9,6 +9,7 @@ input they depend on, so a repeated run only evaluates the models.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import sys
@@ -22,7 +23,7 @@ from ..analysis.comparison import Trials, reference_filtered
 from ..analysis.elbow import elbow_analysis
 from ..analysis.errors import global_range
 from ..analysis.placement import HEADLINE, OBJECTIVE, VARIANTS, FitCache, Scorer, fit
-from ..analysis.report import errors_json, tables_markdown, update_readme, write_json
+from ..analysis.report import _clean, errors_json, tables_markdown, update_readme, write_json
 from ..analysis.robustness import robustness
 from ..analysis.sensitivity import sensitivity
 from ..analysis.validation import across_sizes, held_out
@@ -94,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", type=Path, default=None,
                     help="fit cache (default <out>/cache.json); --no-cache to refit everything")
     ap.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
+    ap.add_argument("--docs", type=Path, default=None,
+                    help="write the reviewed comparison (verdict, statistics, every table) to this file")
     ap.add_argument("--readme", type=Path, default=None,
                     help="rewrite the generated tables between the paper markers of this README")
     args = ap.parse_args(argv)
@@ -179,6 +182,11 @@ def main(argv: list[str] | None = None) -> int:
     (args.out / "tables.md").write_text(tables_markdown(results), encoding="utf-8")
     if args.readme is not None:
         update_readme(args.readme, results)
+    if args.docs is not None:
+        from ..analysis.paper_doc import paper_markdown
+
+        args.docs.parent.mkdir(parents=True, exist_ok=True)
+        args.docs.write_text(paper_markdown(json.loads(json.dumps(_clean(results)))), encoding="utf-8")
     bar.close()
     print(f"wrote {args.out}/results.json, tables.md, fig3.png ... fig6.png in "
           f"{results['wall_time_s']:.1f} s (cache: {cache.hits} hits, {cache.misses} computed; "
