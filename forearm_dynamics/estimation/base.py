@@ -33,8 +33,10 @@ class StateEstimator(ABC):
       The caller guarantees t_ns increases; it calls `reset()` on a stamp jump. A sample
       with NaN/inf or a stamp not after the last one raises ValueError and leaves the
       state untouched (`check()`), so a rejected sample never enters the filter.
-    - `predict(t_ns)` overwrites q, qd, qdd with the extrapolation to t_ns ≥ the last
-      update (for a fixed output rate); it never changes the filter state. Every update()
+    - `predict(t_ns)` overwrites q, qd, qdd with the extrapolation to t_ns ≥ stamp_ns
+      (for a fixed output rate); it never changes the filter state.
+    - `stamp_ns`: the stamp the estimate in q, qd, qdd belongs to (the last update's, or
+      an older sample's with a delay; None: nothing to output yet). Every update()
       starts with `check()` (which also counts the sample for predict()).
     - No allocation per sample: q, qd, qdd are preallocated and filled in place.
     - `describe(dt)` states the method, its settings, the lag of each estimate (s) at
@@ -60,6 +62,9 @@ class StateEstimator(ABC):
         self.qd = np.zeros(n)
         self.qdd = np.zeros(n)
         self._t_ns: int | None = None  # stamp of the last update
+        #: the stamp q, qd, qdd are the estimate of: the last update's for a causal
+        #: estimator, an older sample's with a delay (kalman delay_s), None = nothing to output
+        self.stamp_ns: int | None = None
         self._seq = 0  # accepted samples (check() passed): predict() knows a new update came
         self._snap_seq = -1
         self._snapshot = np.zeros((4, n))  # q, qd, qdd of the last update, scratch
@@ -74,6 +79,7 @@ class StateEstimator(ABC):
         if not math.isfinite(q.sum()) or (qd is not None and not math.isfinite(qd.sum())):
             raise ValueError("non-finite position or velocity: sample refused")
         self._seq += 1
+        self.stamp_ns = t_ns
 
     def run(self, t_ns: np.ndarray, q: np.ndarray, qd: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -81,14 +87,37 @@ class StateEstimator(ABC):
 
         The same update() calls a node makes (no batch shortcut), so results are the
         node's; one estimator may carry several streams with the same stamps as columns.
+        With a delay, each output goes to the row of the sample it estimates (stamp_ns) and
+        the last ones are drained at the end; a row never output keeps the raw sample.
         """
         n_s = len(t_ns)
-        out = np.empty((3, n_s, self.n))
+        out = np.zeros((3, n_s, self.n))
         warm = np.zeros(n_s, bool)
+        delayed = getattr(self, "delay_s", 0.0) > 0.0
+        if not delayed:
+            for k in range(n_s):
+                warm[k] = self.update(int(t_ns[k]), q[k], None if qd is None else qd[k])
+                out[0, k], out[1, k], out[2, k] = self.q, self.qd, self.qdd
+            return out[0], out[1], out[2], warm
+        out[0] = q
+        if qd is not None:
+            out[1] = qd
+        rows = {int(t): k for k, t in enumerate(t_ns)}
         for k in range(n_s):
-            warm[k] = self.update(int(t_ns[k]), q[k], None if qd is None else qd[k])
-            out[0, k], out[1, k], out[2, k] = self.q, self.qd, self.qdd
+            w = self.update(int(t_ns[k]), q[k], None if qd is None else qd[k])
+            if self.stamp_ns is not None:
+                i = rows[self.stamp_ns]
+                warm[i] = w
+                out[0, i], out[1, i], out[2, i] = self.q, self.qd, self.qdd
+        for stamp, x in self.drain():
+            i = rows[stamp]
+            warm[i] = True
+            out[:, i] = x
         return out[0], out[1], out[2], warm
+
+    def drain(self) -> list[tuple[int, np.ndarray]]:
+        """With a delay: the estimates not yet output, [(stamp, (3, n))]; causal: none."""
+        return []
 
     @abstractmethod
     def reset(self) -> None:
@@ -104,7 +133,7 @@ class StateEstimator(ABC):
         Repeated calls (a 1 kHz output timer between 100 Hz samples) all extrapolate from
         that estimate, kept aside at the first call after each update; no allocation.
         """
-        if self._t_ns is None:
+        if self.stamp_ns is None:
             return
         snap = self._snapshot
         if self._snap_seq != self._seq:
@@ -112,7 +141,7 @@ class StateEstimator(ABC):
             np.copyto(snap[1], self.qd)
             np.copyto(snap[2], self.qdd)
             self._snap_seq = self._seq
-        dt = max((t_ns - self._t_ns) * 1e-9, 0.0)
+        dt = max((t_ns - self.stamp_ns) * 1e-9, 0.0)
         tmp = snap[3]
         np.multiply(snap[2], 0.5 * dt * dt, out=self.q)
         np.multiply(snap[1], dt, out=tmp)

@@ -1,0 +1,288 @@
+"""Per-joint sensor noise, measured where it matters: just above the movement's band.
+
+Why not the third difference of consecutive samples (the first version): it measures the
+noise near the Nyquist frequency. Real sensors' noise is coloured: inverse kinematics and
+soft-tissue artefact are low-pass (correlation times of 20-50 ms), so near Nyquist there is
+little of it, and a filter told that little trusts the data and tracks content that the
+offline 6 Hz practice removes. The third difference of an OpenSim IK result said 0.076 deg
+for an elbow whose noise around 10 Hz is several times that (issue 16). What decides how a
+filter should smooth is the noise level where the movement's spectrum ends, white or not.
+
+Measure: per joint, the 5th divided difference of block means SPACING_S (50 ms) apart, on
+the real stamps: the means m_0 .. m_5 of six consecutive blocks of s = SPACING_S / dt samples
+(a moving sum, so any sample can end a block) at their mean times t_i, z = sum_i w_i m_i with
+w_i = 1 / prod_{j != i} (t_i - t_j). It is zero on any polynomial of order <= 4 (the
+movement, over the 0.3 s it spans), and its response |2 sin(pi f SPACING)|^10 x |boxcar|^2
+peaks at 1 / (2 SPACING) = 10 Hz, just above the 6 Hz band of the offline practice (the
+boxcar suppresses the comb's aliases at 30, 50 Hz ..., which decimated samples would fold
+in). For white noise of std r, var(z) = r^2 sum w^2 / s, so s z^2 / sum w^2 is an unbiased
+estimate of r^2 (the level a white-noise filter should assume); for coloured noise it is
+the white level with the same spectral density around 10 Hz. The movement leaks in where
+it has content there (jerk steps at its start and end): the exact library movements read as up to
+0.23 deg at 100 Hz and 0.72 deg at 1 kHz (the block mean divides noise, not signal, by its
+length), which the filter then treats as noise: exact input at 1 kHz stays within 0.15 %
+(with velocities; benchmarks/estimation.py).
+Every EVERY_S (20 ms, at most every sample) one evaluation per joint, an exponentially
+weighted mean (time constant TAU_S = 2 s; a running mean over the first ones) of the
+evaluations, each winsorised at CLIP_SIGMAS of the current estimate once it has one (unless
+CLIP_RUN evaluations in a row were: then the noise rose and is followed), so a single wild
+sample cannot move it far; the filter's jump gate (gate.py) also hands over its
+prediction instead of a sample it withholds (a marker swap).
+
+Robust to: joints that never move or are exact (their estimate is ~0: they get the floor and
+are passed through; every joint's estimate is its own, so a still joint never lowers
+another's); levels 10-100 x apart (per joint); gaps (a step longer than GAP_PERIODS x the
+previous one restarts the difference window: no difference spans a gap); quantisation (a
+12-bit encoder's 0.09 deg steps on a moving joint read as their 0.026 deg std; a still one
+as 0); jittered stamps (the weights use the real times; uniform stamps reuse one set).
+
+Velocities (when the message has them): v0 - v1 - rho (v1 - v2), rho = dt0 / dt1, zero for
+any constant acceleration at any stamp spacing, variance (1 + (1 + rho)^2 + rho^2) r_v^2 for
+white noise; per joint, every sample (every 8th above ~400 Hz), same weighting.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+SPACING_S = 0.05
+ORDER = 5
+EVERY_S = 0.02
+TAU_S = 2.0
+CLIP_SIGMAS = 4.0
+CLIP_RUN = 3  # evaluations clipped in a row: the noise rose, stop clipping that joint
+GAP_PERIODS = 3.0
+MIN_EVALUATIONS = 5  # before this many, the estimate is not ready
+
+
+def divided_difference_weights(t: list[float]) -> tuple[list[float], float]:
+    """Weights of the divided difference on times t (any order), and the sum of their squares."""
+    w = []
+    for i, ti in enumerate(t):
+        p = 1.0
+        for j, tj in enumerate(t):
+            if j != i:
+                p *= ti - tj
+        w.append(1.0 / p)
+    return w, sum(x * x for x in w)
+
+
+class NoiseEstimator:
+    """Per-joint position (and velocity) noise std, updated sample by sample.
+
+    `add(t_s, q, qd)` takes a sample (t in s); `position()` / `velocity()` are (n,) arrays
+    of the current estimates (rad, rad/s), `ready` / `velocity_ready` whether they have
+    enough evaluations; `restart()` after a gap or a re-initialised filter.
+    """
+
+    def __init__(self, n: int):
+        self.n = n
+        self.ms = np.zeros(n)  # mean square, position
+        self.ms_v = np.zeros(n)
+        self.evaluations = 0
+        self._nclip = np.zeros(n, np.int64)
+        self._nclip_v = np.zeros(n, np.int64)
+        self._over = np.zeros(n, bool)
+        self.velocity_evaluations = 0
+        self._cap = 0
+        self._stride = 0
+        self._every = 1
+        self._dt = 0.0
+        self._ring = np.zeros((0, n))  # block means (moving averages of `stride` samples)
+        self._raw = np.zeros((0, n))  # the last `stride` samples
+        self._rawt: list[float] = []
+        self._msum = np.zeros(n)
+        self._tsum = 0.0
+        self._times: list[float] = []
+        self._pick = np.zeros(ORDER + 1, np.intp)
+        self._rows = np.zeros((ORDER + 1, n))
+        self._z = np.zeros(n)
+        self._tmp = np.zeros(n)
+        self._w = np.zeros(ORDER + 1)
+        self._vring = np.zeros((3, n))
+        self._vt = [0.0, 0.0, 0.0]
+        self._count = 0
+        self._vcount = 0
+        self._last_ns: int | None = None
+        self._origin: int | None = None
+        self._dt_avg = 0.0
+        self._same = 0  # consecutive steps of the same length (to 1 us): uniform weights
+        self._last_d = 0
+        self._uniform: tuple[int, np.ndarray, float] | None = None
+
+    # -- configuration -------------------------------------------------------------------
+    def _configure(self, dt: float) -> None:
+        """Stride and ring for sample period dt (on the first step and when the rate changes)."""
+        self._dt = dt
+        self._stride = max(1, round(SPACING_S / dt))
+        self._every = max(1, round(EVERY_S / dt))
+        cap = ORDER * self._stride + 1
+        if cap != self._cap:
+            self._cap = cap
+            self._ring = np.zeros((cap, self.n))
+            self._times = [0.0] * cap
+            self._raw = np.zeros((self._stride, self.n))
+            self._rawt = [0.0] * self._stride
+        self._count = 0
+
+    def shift(self, offset: np.ndarray) -> None:
+        """A discontinuity of `offset` (n,) at the newest sample: the stored samples are moved
+        by it, so the difference window continues across the jump without seeing it."""
+        self._ring += offset
+        if self._cap:
+            self._raw += offset
+            self._msum += offset * min(self._count, self._stride)
+        self._vcount = 0
+
+    def restart(self) -> None:
+        """No difference across this point (a gap, a re-initialised filter); estimates stay."""
+        self._count = 0
+        self._vcount = 0
+        self._last_ns = None
+        self._same = 0
+
+    # -- samples -------------------------------------------------------------------------
+    def add(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
+        """The sample at t_ns (positions, and velocities or None)."""
+        if self._origin is None:
+            self._origin = t_ns
+        t_s = (t_ns - self._origin) * 1e-9  # relative: full float precision for the weights
+        last = self._last_ns
+        self._last_ns = t_ns
+        if last is not None:
+            d = t_ns - last
+            dt = d * 1e-9
+            if not self._dt:  # the first step sets the stride
+                self._configure(dt)
+                self._dt_avg = dt
+            elif dt > GAP_PERIODS * self._dt:  # a gap: no difference spans it
+                self._count = self._vcount = 0
+            else:  # a new rate (not jitter: the mean moves) reconfigures the stride
+                self._dt_avg += 0.05 * (dt - self._dt_avg)
+                if abs(self._dt_avg - self._dt) > 0.25 * self._dt:
+                    self._configure(self._dt_avg)
+            self._same = self._same + 1 if abs(d - self._last_d) <= 1000 else 0
+            self._last_d = d
+        if self._stride:
+            self._add_position(t_s, q)
+        if qd is not None:
+            self._add_velocity(t_s, qd)
+
+    def _add_position(self, t_s: float, q: np.ndarray) -> None:
+        s, cap = self._stride, self._cap
+        c = self._count
+        hr = c % s
+        msum = self._msum
+        if c >= s:  # the moving sum over the last s samples (the block mean)
+            msum -= self._raw[hr]
+            self._tsum -= self._rawt[hr]
+        elif c == 0:
+            msum.fill(0.0)
+            self._tsum = 0.0
+        np.copyto(self._raw[hr], q)
+        self._rawt[hr] = t_s
+        msum += q
+        self._tsum += t_s
+        self._count = c = c + 1
+        if c % 8192 == 0:  # no rounding drift in the running sum
+            np.sum(self._raw, axis=0, out=msum)
+            self._tsum = sum(self._rawt)
+        if c < s:
+            return
+        m = c - s  # index of this block mean since the restart
+        h = m % cap
+        np.multiply(msum, 1.0 / s, out=self._ring[h])
+        self._times[h] = self._tsum / s
+        if m + 1 < cap or c % self._every:
+            return
+        s = self._stride
+        pick = self._pick
+        for i in range(ORDER + 1):
+            pick[i] = (h - i * s) % cap
+        if self._same >= cap + s:  # uniform stamps over the window: the weights of that spacing
+            u = self._uniform
+            if u is None or u[0] != self._last_d:
+                span = [-(i * s * self._last_d) * 1e-9 for i in range(ORDER + 1)]
+                w, sw = divided_difference_weights(span)
+                u = self._uniform = (self._last_d, np.array(w), sw)
+            _, w, sw = u
+        else:  # jittered: the weights of these times
+            wl, sw = divided_difference_weights([self._times[p] for p in pick.tolist()])
+            w = self._w
+            w[:] = wl
+        np.take(self._ring, pick, axis=0, out=self._rows)
+        z = self._z
+        np.dot(w, self._rows, out=z)
+        z *= z
+        z *= s / sw  # a block mean of s white samples has variance r^2 / s
+        self.evaluations += 1
+        self._accumulate(self.ms, z, self.evaluations, self._every * self._dt)
+
+    def _add_velocity(self, t_s: float, qd: np.ndarray) -> None:
+        c = self._vcount
+        h = c % 3
+        np.copyto(self._vring[h], qd)
+        self._vt[h] = t_s
+        self._vcount = c = c + 1
+        vstride = 8 if self._dt and self._dt < 2.5e-3 else 1
+        if c < 3 or c % vstride:
+            return
+        t0, t1, t2 = self._vt[h], self._vt[(h - 1) % 3], self._vt[(h - 2) % 3]
+        if not (t0 > t1 > t2):
+            return
+        rho = (t0 - t1) / (t1 - t2)
+        v1, v2 = self._vring[(h - 1) % 3], self._vring[(h - 2) % 3]
+        z, tmp = self._z, self._tmp
+        np.subtract(v1, v2, out=tmp)
+        tmp *= rho
+        np.subtract(qd, v1, out=z)
+        z -= tmp
+        z *= z
+        z *= 1.0 / (1.0 + (1.0 + rho) ** 2 + rho * rho)
+        self.velocity_evaluations += 1
+        self._accumulate(self.ms_v, z, self.velocity_evaluations, vstride * (t0 - t1))
+
+    def _accumulate(self, ms: np.ndarray, sq: np.ndarray, k: int, step_s: float) -> None:
+        """Running mean over the first evaluations, then exponential (TAU_S); winsorised."""
+        if k > MIN_EVALUATIONS:  # winsorise, unless clipped CLIP_RUN times in a row (a change)
+            nclip = self._nclip_v if ms is self.ms_v else self._nclip
+            lim, over = self._tmp, self._over
+            np.multiply(ms, CLIP_SIGMAS * CLIP_SIGMAS, out=lim)
+            np.greater(sq, lim, out=over)
+            if over.any():
+                nclip += 1
+                nclip *= over
+                lim[nclip >= CLIP_RUN] = np.inf
+                np.minimum(sq, lim, out=sq)
+            else:
+                nclip.fill(0)
+        a = min(1.0, max(1.0 / k, step_s / TAU_S))
+        sq -= ms
+        sq *= a
+        ms += sq
+
+    # -- estimates -----------------------------------------------------------------------
+    @property
+    def ready(self) -> bool:
+        return self.evaluations >= MIN_EVALUATIONS
+
+    @property
+    def velocity_ready(self) -> bool:
+        return self.velocity_evaluations >= MIN_EVALUATIONS
+
+    def position(self, out: np.ndarray) -> np.ndarray:
+        np.sqrt(np.maximum(self.ms, 0.0, out=out), out=out)
+        return out
+
+    def velocity(self, out: np.ndarray) -> np.ndarray:
+        np.sqrt(np.maximum(self.ms_v, 0.0, out=out), out=out)
+        return out
+
+
+def white_level_of_coloured(sigma: float, tau_s: float, f_hz: float, rate_hz: float) -> float:
+    """The white-noise std with the same spectral density at f_hz as first-order low-pass
+    (Ornstein-Uhlenbeck) noise of std sigma and correlation time tau_s, sampled at rate_hz
+    (what this estimator reports for such noise, to first order; used by the tests)."""
+    return sigma * math.sqrt(2.0 * tau_s * rate_hz / (1.0 + (2.0 * math.pi * f_hz * tau_s) ** 2))
