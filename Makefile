@@ -56,6 +56,7 @@ bench: setup
 	ROS_DOMAIN_ID=75 $(PY) benchmarks/torque_node_rate.py --out benchmarks/results.json
 	ROS_DOMAIN_ID=75 $(PY) -m benchmarks.realtime --out benchmarks/results.json
 	$(PY) benchmarks/estimation.py
+	$(PY) benchmarks/estimation_zoo.py
 
 # torque_node output_rate_hz 1000 from 100 Hz, and live model changes at 1 kHz (~1 min)
 bench-rate: setup
@@ -84,3 +85,4 @@ reproduce: setup
 # benchmarks/results.json and benchmarks/estimation.png
 bench-estimation: setup
 	$(PY) benchmarks/estimation.py
+	$(PY) benchmarks/estimation_zoo.py

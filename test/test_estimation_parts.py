@@ -87,20 +87,27 @@ def test_a_constant_joint_does_not_lower_another_joints_belief() -> None:
 @pytest.mark.parametrize(("tau", "rate"), [(0.02, 100.0), (0.05, 100.0), (0.03, 200.0)])
 def test_coloured_noise_is_not_believed_3x_too_small(tau, rate) -> None:
     """Low-pass noise (IK, soft-tissue artefact; correlation time 20-50 ms) of std 1 deg: the
-    band estimate believes at least a third of the std, and the white level with the same
-    spectral density around 10 Hz (noise.white_level_of_coloured) within 30 %; the third
-    difference of consecutive samples (the first version's measure) believes 2-5 x less."""
+    filter measures at least a third of the std, and the white level with the same spectral
+    density around 10 Hz (noise.white_level_of_coloured) within 30 %; the third difference of
+    consecutive samples (the first version's measure) reads 2-5 x less. Its belief is that
+    measurement with the cap off; with the default cap (coloured: never smooth below 7 Hz)
+    the belief is where the filter's bandwidth is 7 Hz."""
     sigma = math.radians(1.0)
     t = grid(round(6.0 * rate), rate)
     z = motion(t) + ou_noise(np.random.default_rng(3), len(t), N, sigma, tau, rate)
     est = make_estimator("kalman", N)
     est.run(t, z)
-    r = est.noise_per_joint()
+    r = np.sqrt(est.measured_noise()[0])
     assert r.min() >= sigma / 3
     np.testing.assert_allclose(r, white_level_of_coloured(sigma, tau, 10.0, rate), rtol=0.3)
     d3 = np.diff(z, 3, axis=0)
     third = np.sqrt(np.mean(d3**2, axis=0) / 20.0)  # what a third difference believes
     assert (third < r / 2).all()  # the naive estimate this replaces
+    w = (est.psd / (np.asarray(est.noise_per_joint()) ** 2 / rate)) ** (1 / 6) / (2 * math.pi)
+    np.testing.assert_allclose(w, est.values["kalman_min_bandwidth_hz"], rtol=1e-9)  # the cap
+    off = make_estimator("kalman", N, {"kalman_min_bandwidth_hz": 0.0})
+    off.run(t, z)
+    np.testing.assert_allclose(off.noise_per_joint(), np.sqrt(off.measured_noise()[0]), rtol=0.25)
 
 
 def test_quantised_encoder_still_and_moving() -> None:

@@ -21,7 +21,24 @@ floor and is passed through; a noisy one is smoothed by its own noise.
 
 Noise: kalman_noise_deg > 0 fixes the position noise of every joint (degrees); 0 estimates
 it per joint online (noise.py: the level around 10 Hz, above the movement's band, white or
-coloured), floored at kalman_noise_floor_deg and updated every 0.25 s. Velocity noise
+coloured), floored at kalman_noise_floor_deg and updated every 0.25 s. Positions only, a joint
+whose band level exceeds 1.5 x its white level (third differences of consecutive samples,
+near Nyquist, where no movement is) has coloured noise or movement content around 10 Hz
+(IK and soft-tissue artefact; running IK's impacts), and its belief is capped where the
+filter's bandwidth, (psd / (r^2 dt))^(1/6), falls to kalman_min_bandwidth_hz (7 Hz: 0.37
+deg at 100 Hz): the offline practice keeps everything below 6 Hz, and a causal filter that
+smooths into that band is wrong against it (two running IK recordings, torque NRMSE against
+the practice over the causal 6 Hz Butterworth's: 1.2-1.3 x uncapped, 1.01 / 1.04 x capped at
+6 Hz, 0.95 / 0.86 x at 8 Hz; the synthetic mocap IK sensor against its truth prefers 6-7 Hz:
+elbow / pro-sup 0.75 / 0.70-0.74 x, 0.77 / 0.87 x at 8 Hz; 7 Hz serves both; /tmp sweeps of
+benchmarks/estimation_zoo.py, whose committed output states the default's numbers). With a
+delay (delay_s > 0) the cap is off: the smoother sees each sample from both sides, as the
+practice does (mocap IK 100 Hz, delay 50 ms: 1.27 / 1.04 x the offline floor uncapped,
+1.43 / 1.62 x capped at 8 Hz).
+White noise (band and white levels alike: a camera, a
+glove, an encoder) is noise at every frequency and is smoothed as strongly as it says.
+The jump
+gate judges with the noise as measured. Velocity noise
 likewise from given velocities, or fixed by kalman_velocity_noise_dps.
 
 Gate (gate.py): a joint whose innovation exceeds 4 sigma + 1 deg is held back one sample;
@@ -52,6 +69,7 @@ white noise (the noise estimate is unbiased there, as the first version's was).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -67,11 +85,25 @@ NOISE_EVERY_S = 0.25
 BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
 MAX_DELAY_S = 0.2
+COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
 
 
 def _summary(r: np.ndarray, floor: float) -> float:
     above = r[r > floor * 1.0001]
     return float(np.median(above)) if len(above) else float(r.max())
+
+
+@dataclass(frozen=True)
+class NoiseGroup:
+    """Joints `idx` filtered with one noise level (r, r_v; r_v None without velocities):
+    the gain (3, m) and prior covariance M (3, 3) of the last step, at period dt."""
+
+    idx: np.ndarray
+    r: float
+    r_v: float | None
+    gain: np.ndarray
+    prior: np.ndarray
+    dt: float
 
 
 class _Group:
@@ -104,6 +136,10 @@ class KalmanCA(StateEstimator):
         SettingSpec("kalman_noise_floor_deg", 0.01, "deg",
                     "lowest noise the online estimate may believe (and the velocity floor in deg/s)",
                     lo=1e-6, hi=90.0),
+        SettingSpec("kalman_min_bandwidth_hz", 7.0, "Hz",
+                    "causal, positions only, coloured noise: never smooth below this band (keeps "
+                    "what the offline 6 Hz practice keeps): the belief is capped where the "
+                    "filter's bandwidth reaches it; 0 = off", lo=0.0, hi=1000.0),
         SettingSpec("delay_s", 0.0, "s",
                     "output the fixed-lag smoothed estimate of the sample this far back, "
                     "stamped with its stamp (0 = causal)", lo=0.0, hi=MAX_DELAY_S),
@@ -119,6 +155,8 @@ class KalmanCA(StateEstimator):
         self.delay_s = v["delay_s"]
         # per-joint noise belief (rad, rad/s); before any estimate: 0.5 deg, 1 deg/s
         self._r = np.full(n, self._fixed_r or math.radians(0.5))
+        self._r_gate = self._r.copy()
+        self._wmin = 2.0 * math.pi * v["kalman_min_bandwidth_hz"]
         self._rv = np.full(n, self._fixed_rv or math.radians(1.0))
         self._X = np.zeros((3, n))
         self._T3 = np.zeros((3, n))
@@ -139,6 +177,7 @@ class KalmanCA(StateEstimator):
         self._held_qd = np.zeros(n)
         self._held_t = 0
         self._groups: list[_Group] = []
+        self._groups_version = 0
         self._gidx = np.zeros(n, np.intp)
         self._bins = np.full((2, n), -10**6)
         self._Kg = np.zeros((6, 1))
@@ -173,6 +212,41 @@ class KalmanCA(StateEstimator):
 
     def velocity_noise(self) -> float | None:
         return _summary(self._rv, self._floor)
+
+    @property
+    def period_s(self) -> float:
+        """The last sample period (s) the filter stepped with."""
+        return self._dt
+
+    @property
+    def groups_version(self) -> int:
+        """Changes whenever the noise groups (levels, members, velocity mode) change."""
+        return self._groups_version
+
+    def noise_groups(self) -> list[NoiseGroup]:
+        """The groups of joints sharing a noise level and a gain, as the last step used them
+        (for torque uncertainty: issue 19's state_source reads these, nothing private)."""
+        out = []
+        for g in self._groups:
+            if g.P is None or not g.k:
+                continue
+            m = len(g.k) // 3
+            out.append(NoiseGroup(g.idx.copy(), g.r, g.rv if m == 2 else None,
+                                  np.array(g.k).reshape(3, m), ca_model.to_matrix(g.M), g.dt))
+        return out
+
+    def measured_noise(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint (position, velocity) noise variances as measured, BEFORE the floor (the
+        floor keeps the gain sane on exact input; it is a belief, not noise that is there);
+        the fixed values where set, the default belief before the first estimate."""
+        ne = self.noise_estimator
+        r2 = self._r**2
+        rv2 = self._rv**2
+        if self._fixed_r is None and ne.ready:
+            r2 = ne.position(np.zeros(self.n)) ** 2
+        if self._fixed_rv is None and ne.velocity_ready:
+            rv2 = ne.velocity(np.zeros(self.n)) ** 2
+        return r2, rv2
 
     def covariance(self) -> np.ndarray:
         """Posterior covariance of (q, qd, qdd) per joint, (n, 3, 3), of the estimate in
@@ -241,6 +315,7 @@ class KalmanCA(StateEstimator):
             self._gidx[g.idx] = i
             groups.append(g)
         self._groups = groups
+        self._groups_version += 1
         self._vel = vel
         self._Kg = np.zeros((6, len(groups)))
         self._Sg = np.zeros(len(groups))
@@ -274,14 +349,18 @@ class KalmanCA(StateEstimator):
                 kg[0, i], kg[3, i], kg[1, i], kg[4, i], kg[2, i], kg[5, i] = k
             else:
                 kg[0, i], kg[1, i], kg[2, i] = k
-            sg[i] = math.sqrt(m[0] + r2)
+            sg[i] = m[0]
             changed = True
         if changed:
             gi = self._gidx
             np.take(kg[:3], gi, axis=1, out=self._Kp)
             if vel:
                 np.take(kg[3:], gi, axis=1, out=self._Kv)
-            np.take(sg, gi, out=self._sig)
+            sig = self._sig  # innovation std per joint, with the noise as measured
+            np.take(sg, gi, out=sig)
+            np.multiply(self._r_gate, self._r_gate, out=self._tmp)
+            sig += self._tmp
+            np.sqrt(sig, out=sig)
 
     # -- update ---------------------------------------------------------------------------
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
@@ -401,6 +480,15 @@ class KalmanCA(StateEstimator):
         if self._fixed_r is None and ne.ready:
             ne.position(self._r)
             np.maximum(self._r, self._floor, out=self._r)
+            np.copyto(self._r_gate, self._r)  # the gate judges with the noise as measured
+            if not vel and self._wmin > 0.0 and ne.period_s > 0.0 and self.delay_s <= 0.0:
+                # never smooth below the practice's band: cap at the noise whose filter
+                # bandwidth (psd / (r^2 dt))^(1/6) is kalman_min_bandwidth_hz
+                cap = math.sqrt(self.psd / (self._wmin**6 * ne.period_s))
+                white = ne.white(self._tmp)
+                white *= COLOURED_RATIO  # band level above this: coloured, capped
+                np.minimum(np.where(self._r > white, cap, np.inf), self._r, out=self._r)
+                np.maximum(self._r, self._floor, out=self._r)
             self._armed = moved = True
         if vel and self._fixed_rv is None and ne.velocity_ready:
             ne.velocity(self._rv)

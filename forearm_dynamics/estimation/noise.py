@@ -82,6 +82,11 @@ class NoiseEstimator:
         self.ms = np.zeros(n)  # mean square, position
         self.ms_v = np.zeros(n)
         self.evaluations = 0
+        self.white_evaluations = 0
+        self.ms_w = np.zeros(n)  # mean square of the third difference / 20: the white level
+        self._wring = np.zeros((4, n))
+        self._wcount = 0
+        self._d3 = [np.roll([-1.0, 3.0, -3.0, 1.0], h + 1) for h in range(4)]  # newest at h
         self._nclip = np.zeros(n, np.int64)
         self._nclip_v = np.zeros(n, np.int64)
         self._over = np.zeros(n, bool)
@@ -131,6 +136,7 @@ class NoiseEstimator:
         """A discontinuity of `offset` (n,) at the newest sample: the stored samples are moved
         by it, so the difference window continues across the jump without seeing it."""
         self._ring += offset
+        self._wcount = 0
         if self._cap:
             self._raw += offset
             self._msum += offset * min(self._count, self._stride)
@@ -140,6 +146,7 @@ class NoiseEstimator:
         """No difference across this point (a gap, a re-initialised filter); estimates stay."""
         self._count = 0
         self._vcount = 0
+        self._wcount = 0
         self._last_ns = None
         self._same = 0
 
@@ -158,7 +165,7 @@ class NoiseEstimator:
                 self._configure(dt)
                 self._dt_avg = dt
             elif dt > GAP_PERIODS * self._dt:  # a gap: no difference spans it
-                self._count = self._vcount = 0
+                self._count = self._vcount = self._wcount = 0
             else:  # a new rate (not jitter: the mean moves) reconfigures the stride
                 self._dt_avg += 0.05 * (dt - self._dt_avg)
                 if abs(self._dt_avg - self._dt) > 0.25 * self._dt:
@@ -166,6 +173,7 @@ class NoiseEstimator:
             self._same = self._same + 1 if abs(d - self._last_d) <= 1000 else 0
             self._last_d = d
         if self._stride:
+            self._add_white(q)
             self._add_position(t_s, q)
         if qd is not None:
             self._add_velocity(t_s, qd)
@@ -220,6 +228,28 @@ class NoiseEstimator:
         self.evaluations += 1
         self._accumulate(self.ms, z, self.evaluations, self._every * self._dt)
 
+    def _add_white(self, q: np.ndarray) -> None:
+        """Third difference of consecutive samples (every 8th window above ~400 Hz): the
+        white level, near Nyquist, where no movement is."""
+        c = self._wcount
+        h = c % 4
+        wstride = 8 if self._dt < 2.5e-3 else 1
+        self._wcount = c = c + 1
+        if (-c) % wstride >= 4:
+            return
+        np.copyto(self._wring[h], q)
+        if c % wstride or c < 4:
+            return
+        z = self._z
+        np.dot(self._d3[h], self._wring, out=z)
+        z *= z
+        z *= 1.0 / 20.0
+        self.white_evaluations += 1
+        a = min(1.0, max(1.0 / self.white_evaluations, wstride * self._dt / TAU_S))
+        z -= self.ms_w
+        z *= a
+        self.ms_w += z
+
     def _add_velocity(self, t_s: float, qd: np.ndarray) -> None:
         c = self._vcount
         h = c % 3
@@ -265,6 +295,11 @@ class NoiseEstimator:
 
     # -- estimates -----------------------------------------------------------------------
     @property
+    def period_s(self) -> float:
+        """The nominal sample period (s) the stride was set for (0 before the first step)."""
+        return self._dt
+
+    @property
     def ready(self) -> bool:
         return self.evaluations >= MIN_EVALUATIONS
 
@@ -274,6 +309,11 @@ class NoiseEstimator:
 
     def position(self, out: np.ndarray) -> np.ndarray:
         np.sqrt(np.maximum(self.ms, 0.0, out=out), out=out)
+        return out
+
+    def white(self, out: np.ndarray) -> np.ndarray:
+        """The white level per joint (rad): third differences of consecutive samples."""
+        np.sqrt(np.maximum(self.ms_w, 0.0, out=out), out=out)
         return out
 
     def velocity(self, out: np.ndarray) -> np.ndarray:

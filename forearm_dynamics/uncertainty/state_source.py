@@ -1,11 +1,11 @@
 """What the σ needs from a state estimator, read in ONE place (the adapter of issue 19).
 
 The propagation needs the covariance of each joint's (q, q̇, q̈) estimate and the
-estimator's steady-state error per unit jerk (its lag). Today only the Kalman filter
-(estimation/kalman.py) carries a covariance: one 3x3 posterior P shared by all joints
-(same dt, same noise belief), in private attributes. When the estimator exposes a public
-per-joint covariance, `state_source()` is the one function to switch; nothing else in the
-package reads estimator internals.
+estimator's steady-state error per unit jerk (its lag). Only the Kalman filter
+(estimation/kalman.py) carries a covariance: per joint, from the gain of the joint's noise
+group (issue 16: joints are grouped by their own noise level), read through its public API
+(noise_groups(), measured_noise(), covariance(), period_s); nothing else in the package
+reads estimator internals.
 
 Which covariance. The filter's P is the error covariance IF the motion were white jerk of
 the model's spectral density (kalman_jerk_psd): it adds the measurement noise seen through
@@ -35,7 +35,8 @@ import math
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
-from ..estimation.kalman import KalmanCA, measurement_update, observation, transition
+from ..estimation.ca_model import observation, transition
+from ..estimation.kalman import KalmanCA
 from .lag import MAX_BASELINE
 
 #: the gain-derived quantities are re-derived at most this often (s of stream time) unless the
@@ -72,9 +73,11 @@ def noise_covariance(k: np.ndarray, dt: float, r: np.ndarray, baseline: int) -> 
 
 
 class StateSource:
-    """Reads one Kalman estimator after each update(): `cov()` the (6,) covariance tuple
-    (COV_KEYS order, shared by the joints), `lag` (3,) per unit jerk, `baseline` and
-    `delta_noise_var` for the jerk estimate."""
+    """Reads one Kalman estimator after each update(), through its public API
+    (noise_groups(), measured_noise(), period_s): `cov()` the covariance in COV_KEYS order,
+    a (6,) tuple when every joint has the same (one noise group, same measured noise), else
+    an (n, 6) array per joint; `lag` (3,) per unit jerk (of the noisiest group: the largest
+    lag), `baseline` and `delta_noise_var` (scalar or (n,)) for the jerk estimate."""
 
     def __init__(self, est: KalmanCA, covariance: str = "noise"):
         if covariance not in ("noise", "posterior"):
@@ -82,61 +85,80 @@ class StateSource:
         self.est = est
         self.kind = covariance
         self.lag = np.zeros(3)
-        self.delta_noise_var = 0.0
+        self.delta_noise_var: float | np.ndarray = 0.0
         self.baseline = 1
-        self._noise: tuple[float, ...] | None = None
+        self._noise: tuple[float, ...] | np.ndarray | None = None
         self._t = -math.inf
         self._dt: float | None = None
         self._dt_seat = 1.0
         self._key: tuple | None = None
         what = ("the covariance of (q, qd, qdd) that the measurement noise drives through the "
-                f"{est.name} filter's gain (discrete Lyapunov, noise belief of the filter)"
+                f"{est.name} filter's gain (discrete Lyapunov, noise measured per joint)"
                 if covariance == "noise" else f"{est.name} posterior covariance P of (q, qd, qdd)")
-        self.description = {"estimation": f"{what}, one 3x3 shared by the joints, through "
+        self.description = {"estimation": f"{what}, per joint (its noise group's gain), through "
                                           "computeRNEADerivatives (dtau/dq, dtau/dqd, M)"}
 
     def refresh(self, t_s: float, velocity_given: bool) -> None:
-        """Re-derive gain, lag, noise covariance if the mean period or the noise belief moved,
-        or every 0.25 s of stream time (about 100 us each: never per sample)."""
+        """Re-derive gains, lag, noise covariance if the mean period or the noise groups
+        moved, or every 0.25 s of stream time (never per sample)."""
         est = self.est
-        if est._P is None:
-            return
         # the MEAN period (exponential, ~20 samples), against the one of the last refresh with
         # 5 % of hysteresis: a jittered stream's dt moves every sample, its settled gain hardly
-        self._dt = dt = est._dt if self._dt is None else self._dt + 0.05 * (est._dt - self._dt)
-        key = (velocity_given, est._r, est._r_v if velocity_given else 0.0)
+        p = est.period_s
+        self._dt = dt = p if self._dt is None else self._dt + 0.05 * (p - self._dt)
+        key = (velocity_given, est.groups_version)
         if (key == self._key and t_s - self._t < _REFRESH_S
                 and abs(math.log(dt / self._dt_seat)) < _DT_MOVE):
             return
+        groups = est.noise_groups()
+        if not groups or dt <= 0.0:
+            return
         self._dt_seat = dt
-        r2 = est._r**2
-        rv2 = est._r_v**2 if velocity_given else None
-        g, _ = measurement_update(est._prior(dt), r2, rv2)
-        k = np.array(g).reshape(3, 1 if rv2 is None else 2)
+        worst = max(groups, key=lambda g: g.r)
+        k = worst.gain
+        if k.shape[1] != (2 if velocity_given else 1):
+            return
         self.lag = lag_per_jerk(k, dt, velocity_given)
         self.baseline = int(min(MAX_BASELINE, max(1, round(abs(self.lag[2]) / dt))))
-        n2, nv2 = self.measured_noise()
-        rm = np.diag([n2] if rv2 is None else [n2, nv2])
-        sig, self.delta_noise_var = noise_covariance(k, dt, rm, self.baseline)
-        self._noise = tuple(float(sig[i, j]) for i, j in _IDX)
+        r2, rv2 = est.measured_noise()
+        n = est.n
+        cov = np.zeros((n, 6))
+        dnv = np.zeros(n)
+        for g in groups:
+            # Σ is linear in R = diag(n2, nv2): one solve per unit measurement, combined per joint
+            parts = []
+            for i in range(g.gain.shape[1]):
+                unit = np.zeros((g.gain.shape[1],) * 2)
+                unit[i, i] = 1.0
+                parts.append(noise_covariance(g.gain, dt, unit, self.baseline))
+            (s0, d0) = parts[0]
+            c0 = np.array([s0[i, j] for i, j in _IDX])
+            cov[g.idx] = r2[g.idx, None] * c0
+            dnv[g.idx] = r2[g.idx] * d0
+            if len(parts) == 2:
+                s1, d1 = parts[1]
+                cov[g.idx] += rv2[g.idx, None] * np.array([s1[i, j] for i, j in _IDX])
+                dnv[g.idx] += rv2[g.idx] * d1
+        if np.ptp(cov, axis=0).max() <= 1e-15 * max(np.abs(cov).max(), 1e-300):
+            self._noise = tuple(float(x) for x in cov[0])  # shared: the propagator's fast path
+            self.delta_noise_var = float(dnv[0])
+        else:
+            self._noise = cov
+            self.delta_noise_var = dnv
         self._key, self._t = key, t_s
 
-    def measured_noise(self) -> tuple[float, float]:
-        """(position, velocity) noise variances that drive the error: the filter's online
-        statistics BEFORE its floor (kalman_noise_floor_deg keeps the gain sane on exact
-        input; it is a belief, not noise that is there), or the fixed values when set. Until
-        the first online estimate, the filter's default belief."""
-        est = self.est
-        r2, rv2 = est._r**2, est._r_v**2
-        if est._fixed_r is None and est._qcount >= 7:
-            r2 = max(float(np.median(est._ms)), 0.0) / 20.0
-        if est._fixed_rv is None and est._vcount >= 6:
-            rv2 = max(float(np.median(est._ms_v)), 0.0)
-        return r2, rv2
+    def measured_noise(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint (position, velocity) noise variances that drive the error (the filter's
+        measurement before its floor; KalmanCA.measured_noise)."""
+        return self.est.measured_noise()
 
-    def cov(self) -> tuple[float, ...] | None:
+    def cov(self) -> tuple[float, ...] | np.ndarray | None:
         if self.kind == "posterior":
-            return self.est._P
+            p = self.est.covariance()
+            c = np.stack([p[:, i, j] for i, j in _IDX], axis=1)
+            if np.ptp(c, axis=0).max() == 0.0:
+                return tuple(float(x) for x in c[0])
+            return c
         return self._noise
 
 
