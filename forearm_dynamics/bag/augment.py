@@ -183,7 +183,7 @@ def augment(src: Path, dst: Path, topics: list[tuple[str, str, TopicQos]],
             c.write(rb)
         out.write(rb.end())
         chunk_indexes = []
-        cctx = zstandard.ZstdCompressor()
+        cctx = zstandard.ZstdCompressor(level=1)  # the copy is written once, read often: speed
         seq = dict.fromkeys(added_ids, 0)
         for raw in _chunks(src, summary.chunk_indexes):
             data = _decompress(raw)

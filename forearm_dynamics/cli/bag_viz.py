@@ -69,13 +69,18 @@ class _Models:
     def __init__(self, configs: list[tuple[int, dict]], args):
         self.configs, self.args = configs, args
         self._built: dict[str, tuple[MarkerMaker, str]] = {}
+        self._keys: dict[int, str] = {}
         self.warnings: list[str] = []
 
     def at(self, stamp_ns: int) -> tuple[str, MarkerMaker, str]:
         cfg = config_in_force(self.configs, stamp_ns)
+        if cfg is not None and id(cfg) in self._keys:
+            return (self._keys[id(cfg)], *self._built[self._keys[id(cfg)]])
         key = "" if cfg is None else json.dumps({k: cfg.get(k) for k in sorted(cfg)
                                                  if k not in ("config_id", "applies_from_stamp_ns",
                                                               "build_ms")}, sort_keys=True)
+        if cfg is not None:
+            self._keys[id(cfg)] = key  # the configs live as long as this object
         if key not in self._built:
             try:
                 choice = model_from_config(cfg)

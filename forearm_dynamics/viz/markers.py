@@ -82,14 +82,14 @@ class MarkerMaker:
         if tau.shape != (self._n,) or not np.isfinite(tau).all():
             raise ValueError(f"torques must be {self._n} finite numbers in joint_names order, "
                              f"got shape {tau.shape}")
-        pos, rot = self.scene.poses(q)
-        quat = quaternions(rot)
+        pose = self.scene.poses7(q)
+        pos, quat = pose[:, :3], pose[:, 3:]
         joint_rgb = self.colours.rgb(tau)
         rgb = np.where((self._joint < 0)[:, None], self._fixed_rgb, joint_rgb[self._joint])
         rgba = np.column_stack([rgb, np.full(len(rgb), self.alpha)])
         if not self.arrows:
             return MarkerFrame(self.ns, self.types, pos, quat, self.scales, rgba)
-        origins, axes = self.scene.joint_axes()  # at q: poses() ran FK
+        origins, axes = self.scene.joint_axes(q)
         length = np.maximum(np.abs(tau) * self.arrow_scale, MIN_ARROW) * np.where(tau < 0, -1.0, 1.0)
         ends = origins + length[:, None] * axes
         return MarkerFrame(self.ns, self.types, pos, quat, self.scales, rgba, self.arrow_ns,

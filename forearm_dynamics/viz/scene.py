@@ -87,6 +87,22 @@ class ArmScene:
         # The root link is the world of the Pinocchio model (no frame): its pose is identity.
         self._frames = [None if s.link == self.root_frame else arm.model.getFrameId(s.link)
                         for s in self.shapes]
+        # One operational frame per moving solid at its centre, axes = the solid's, on a
+        # private copy of the model: Pinocchio then places every solid in one C++ call and
+        # SE3ToXYZQUAT gives its marker pose directly (~10x cheaper than numpy per frame).
+        self._vmodel = pin.Model(arm.model)
+        self._solid_frames, self._fixed = [], {}
+        for k, (s, fid) in enumerate(zip(self.shapes, self._frames)):
+            g = pin.SE3(np.asarray(s.geometry.rotation, float), np.asarray(s.geometry.origin, float))
+            if fid is None:
+                self._fixed[k] = pin.SE3ToXYZQUAT(g)
+                continue
+            f = self._vmodel.frames[fid]
+            joint = getattr(f, "parentJoint", None)
+            joint = f.parent if joint is None else joint
+            self._solid_frames.append((k, self._vmodel.addFrame(pin.Frame(
+                f"{s.link}_visual", joint, fid, f.placement * g, pin.FrameType.OP_FRAME))))
+        self._vdata = self._vmodel.createData()  # after the frames were added
         self._origins = np.array([s.geometry.origin for s in self.shapes], float)
         self._rotations = np.array([s.geometry.rotation for s in self.shapes], float)
         if arm.model.nframes in self._frames:
@@ -94,13 +110,32 @@ class ArmScene:
         self._joint_ids = [arm.model.getJointId(n) for n in arm.joint_names]
         self._axes = np.array([j.axis for j in arm.tree.joints], float)
 
-    def _fk(self, q) -> None:
+    def _checked(self, q) -> np.ndarray:
         q = np.asarray(q, dtype=np.float64).reshape(-1)
         if q.shape != (len(self.joint_names),) or not np.isfinite(q).all():
             raise ValueError(f"positions must be {len(self.joint_names)} finite numbers in "
                              f"joint_names order, got shape {q.shape}")
+        return q
+
+    def _fk(self, q) -> None:
+        q = self._checked(q)
         pin.forwardKinematics(self._model, self._data, q)
         pin.updateFramePlacements(self._model, self._data)
+
+    def poses7(self, q) -> np.ndarray:
+        """(n, 7): every solid's centre (x, y, z) and orientation quaternion (x, y, z, w), w >= 0,
+        in the root frame at q (self.shapes order)."""
+        q = self._checked(q)
+        pin.framesForwardKinematics(self._vmodel, self._vdata, q)
+        out = np.empty((len(self.shapes), 7))
+        frames = self._vdata.oMf
+        for k, fid in self._solid_frames:
+            out[k] = pin.SE3ToXYZQUAT(frames[fid])
+        for k, pose in self._fixed.items():
+            out[k] = pose
+        neg = out[:, 6] < 0
+        out[neg, 3:] *= -1.0
+        return out
 
     def poses(self, q) -> tuple[np.ndarray, np.ndarray]:
         """(centres (n, 3), axes (n, 3, 3)) of the solids (self.shapes order) in the root frame."""
