@@ -63,8 +63,19 @@ class ModelChoice:
     source: str  # "torque_node/config" or "default"
     warnings: list[str] = field(default_factory=list)
 
+    def summary(self) -> dict:
+        """The model as check_bag's JSON report states it."""
+        arm = self.arm
+        return {"kind": arm.kind, "body_size": arm.body_size.label, "side": arm.side,
+                "payload_kg": 0.0 if arm.payload is None else float(arm.payload.mass),
+                "source": self.source}
+
     def describe(self) -> str:
-        return f"{self.arm.kind}, body size {self.arm.body_size.label} (from {self.source})"
+        arm = self.arm
+        extra = "" if arm.side == "right" else f", {arm.side} arm"
+        if arm.payload is not None:
+            extra += f", payload {arm.payload.mass:g} kg"
+        return f"{arm.kind}, body size {arm.body_size.label}{extra} (from {self.source})"
 
 
 def _require(cond: bool, what: str) -> None:

@@ -153,7 +153,8 @@ def test_clean_run_passes(good_bag, reference, tmp_path, capsys) -> None:
                      "nothing to compare")], text
     assert "lost 0 of 2 900 joint_states" in text and "PASS: the data are right" in text
     assert all(m["shortfall"] is None and m["model_note"] is None for m in report["movements"])
-    assert report["model"] == {"kind": "segmented", "body_size": "p50", "source": "torque_node/config"}
+    assert report["model"] == {"kind": "segmented", "body_size": "p50", "side": "right",
+                               "payload_kg": 0.0, "source": "torque_node/config"}
     assert [m["id"] for m in report["movements"]] == list(MOVEMENTS)
     for m in report["movements"]:
         assert m["samples"] == m["expected"] == 1500

@@ -1,6 +1,7 @@
 """bag_torques IN OUT: joint torques for every joint_states of a bag, offline, in batch.
 
     bag_torques IN.mcap OUT.mcap [--model segmented] [--body-size 50 | 1.80,75]
+                [--side right|left] [--payload-mass KG [--payload-com X,Y,Z]]
                 [--estimator kalman|butterworth|savgol|backward|zero_phase]
                 [--setting NAME=VALUE ...] [--accel-cutoff HZ] [--velocity-cutoff HZ]
                 [--cutoff HZ] [--max-stamp-gap S] [--input-topic T] [--topic T] [--overwrite]
@@ -30,6 +31,16 @@ from .common import body_size_arg, die, guarded
 PROG = "bag_torques"
 
 
+def _xyz(text: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r}: give x,y,z in m, e.g. 0.01,-0.08,0.02")
+    return values
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
     ap.add_argument("input", type=Path, help="bag with joint_states (any rosbag2 MCAP)")
@@ -37,6 +48,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--model", default="segmented", choices=MODEL_KINDS)
     ap.add_argument("--body-size", type=body_size_arg, default=50,
                     help="percentile 5, 50, 95 or stature_m,body_mass_kg (default 50)")
+    ap.add_argument("--side", default="right", choices=("right", "left"),
+                    help="which arm (the left is the mirror image; same joint names and signs), "
+                         "as the node's side")
+    ap.add_argument("--payload-mass", type=float, default=0.0, metavar="KG",
+                    help="an object held in the hand (0 = empty hand), as the node's payload_mass")
+    ap.add_argument("--payload-com", type=_xyz, default=None, metavar="X,Y,Z",
+                    help="the object's centre of mass in the hand frame, m (default: the "
+                         "power-grasp point in the palm), as the node's payload_com")
     ap.add_argument("--estimator", default=DEFAULT_ESTIMATOR, choices=ESTIMATORS,
                     help=f"default {DEFAULT_ESTIMATOR} (the torque node's default)")
     ap.add_argument("--setting", action="append", default=[], metavar="NAME=VALUE",
@@ -57,10 +76,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.payload_com is not None and not args.payload_mass:
+        return die(f"{PROG}: error: --payload-com needs --payload-mass", USAGE)
+    payload = {"payload_mass": args.payload_mass, "payload_com": args.payload_com} \
+        if args.payload_mass else {}
     try:
-        arm = build_model(args.model, args.body_size)
+        arm = build_model(args.model, args.body_size, side=args.side, **payload)
     except ValueError as exc:
-        return die(f"{PROG}: error: --body-size/--model: {exc}", USAGE)
+        return die(f"{PROG}: error: --model/--body-size/--side/--payload-mass: {exc}", USAGE)
     settings: dict[str, float] = {}
     for item in args.setting:
         name, sep, value = item.partition("=")
@@ -91,7 +114,9 @@ def run(args: argparse.Namespace) -> int:
     n = len(res.stamps_ns)
     rate = n / res.compute_s if res.compute_s > 0 else float("inf")
     print(f"{PROG}: {n} samples ({res.dropped} dropped by the stamp rules, {res.segments} "
-          f"segment(s)), model {arm.kind} {arm.body_size.label}, estimator {args.estimator}: "
+          f"segment(s)), model {arm.kind} {arm.body_size.label} {arm.side} arm"
+          f"{f', payload {arm.payload.mass:g} kg' if arm.payload is not None else ''}, "
+          f"estimator {args.estimator}: "
           f"computed in {res.compute_s:.3f} s ({rate:,.0f} samples/s); wrote "
           f"{sum(counts.values())} messages to {args.output}")
     return OK

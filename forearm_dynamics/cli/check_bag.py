@@ -22,7 +22,8 @@ on any unmatched sample).
 
 The --json report (NRMSE values are fractions there: 0.01 = 1 %; times in ms or ns as named):
   bag          path, complete, problem, messages, topics {topic: count}
-  model        kind, body_size, source (where the model was read from)
+  model        kind, body_size, side, payload_kg (0 = empty hand), source (where the model
+               was read from)
   joint_names  the model's joint order (keys of the per-DOF dicts)
   movements    per movement marker, in bag order: index, id, name, elbow, t0_ns,
                samples (joint_torques in its window), expected, shortfall (why samples <
@@ -133,8 +134,7 @@ def to_json(report: CheckReport, bag_info, th: Thresholds, code: int) -> dict:
     return _clean({
         "bag": {"path": str(bag_info.path), "complete": bag_info.complete, "problem": bag_info.problem,
                 "messages": bag_info.message_count, "topics": bag_info.topic_counts()},
-        "model": {"kind": report.model.arm.kind, "body_size": report.model.arm.body_size.label,
-                  "source": report.model.source},
+        "model": report.model.summary(),
         "joint_names": list(names),
         "movements": [{
             "index": r.index, "id": r.id, "name": r.name, "elbow": r.elbow, "t0_ns": r.t0_ns,

@@ -183,8 +183,7 @@ def score_dict(report: ScoreReport) -> dict:
 
     return {
         "mode": "markerless",
-        "model": {"kind": report.model.arm.kind, "body_size": report.model.arm.body_size.label,
-                  "source": report.model.source},
+        "model": report.model.summary(),
         "samples": report.samples, "duration_s": report.duration_s, "cutoff_hz": report.cutoff_hz,
         "rmse_nm": {n: clean(v) for n, v in zip(names, report.rmse, strict=True)},
         "nrmse": {n: clean(v) for n, v in zip(names, report.nrmse, strict=True)},

@@ -125,14 +125,17 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
 
 def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Path,
                    input_topic: str, output_topic: str, max_gap_s: float,
-                   cutoff_hz: float | None) -> dict:
-    """What the torque node states on torque_node/config, for an offline run."""
+                   cutoff_hz: float | None, dt_s: float = 1e-3,
+                   velocity_given: bool = False) -> dict:
+    """What the torque node states on torque_node/config, for an offline run: the estimator
+    described at the bag's own sample period `dt_s` (its lags depend on it), as the node
+    describes it at the period it receives."""
     if estimator == "zero_phase":
         desc = {"method": "zero_phase", "settings": {"cutoff_hz": float(
             cutoff_hz if cutoff_hz is not None else analysis_config()["filter"]["cutoff_hz"])},
             "lag_s": {"q": 0.0, "qd": 0.0, "qdd": 0.0}, "offline": True}
     else:
-        desc = make_estimator(estimator, arm.nv, settings or {}).describe(1e-3)
+        desc = make_estimator(estimator, arm.nv, settings or {}).describe(dt_s, velocity_given)
     return model_config.config_message(
         model_config.model_config(arm), node="bag_torques", version=package_version(),
         estimator=desc, input_topic=input_topic, output_topic=output_topic,
@@ -209,6 +212,11 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT
     if not output_topic.startswith("/"):  # relative names: in the input topic's namespace
         ns = stream.topic.rsplit("/", 1)[0]
         output_topic, cfg_topic = f"{ns}/{output_topic}", f"{ns}/{cfg_topic}"
-    config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s, cutoff_hz)
+    steps = np.diff(res.stamps_ns)
+    steps = steps[(steps > 0) & (steps <= max_gap_s * 1e9)]  # within segments
+    dt_s = float(np.median(steps)) * 1e-9 if len(steps) else 1e-3
+    velocity_given = bool(len(stream.has_velocity)) and bool(stream.has_velocity.all())
+    config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s,
+                            cutoff_hz, dt_s, velocity_given)
     counts = write_bag(src, dst, res, arm, config, output_topic, cfg_topic, overwrite)
     return res, counts
