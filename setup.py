@@ -34,6 +34,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml") + glob("config/*.json")),
+        (f"share/{PACKAGE}/config/nodes", glob("config/nodes/*.yaml")),  # node parameters
     ],
     package_data={PACKAGE: ["data/*"]},
     python_requires=">=3.10",

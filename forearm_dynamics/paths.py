@@ -41,4 +41,10 @@ def config_dir() -> Path:
 
 
 def config_file(name: str) -> Path:
+    """Model and analysis data: config/<name> (model.yaml, body_sizes.yaml, movements.yaml ...)."""
     return config_dir() / name
+
+
+def node_config_file(node: str) -> Path:
+    """A node's parameter file: config/nodes/<node>.yaml (generated from its Specs)."""
+    return config_dir() / "nodes" / f"{node}.yaml"

@@ -59,6 +59,10 @@ def test_installed_executable_runs_from_the_install_tree(install, tmp_path):
                        text=True, timeout=60, check=False)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == str(install / "share" / "forearm_dynamics" / "config")
+    from forearm_dynamics.nodes.catalog import NODES  # every node's parameter file, apart
+    nodes = install / "share" / "forearm_dynamics" / "config" / "nodes"
+    assert sorted(p.stem for p in nodes.glob("*.yaml")) == sorted(NODES)
+    assert not (install / "share" / "forearm_dynamics" / "config" / "torque_node.yaml").exists()
     r = subprocess.run([str(install / "lib" / "forearm_dynamics" / "export_urdf"), "--model", "solid",
                         "-o", str(out)], env=env, cwd=tmp_path, capture_output=True, text=True,
                        timeout=60, check=False)

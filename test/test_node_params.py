@@ -1,4 +1,4 @@
-"""Where parameters come from (real processes): the defaults are config/<node>.yaml's (the
+"""Where parameters come from (real processes): the defaults are config/nodes/<node>.yaml's (the
 file the package installs; FOREARM_DYNAMICS_CONFIG points a test at a copy), a params file
 keyed `/**:` reaches a renamed node, and the config topic is the node's own (`~/config`),
 so two torque nodes in two namespaces do not collide."""
@@ -55,8 +55,8 @@ def _get(peer, node: str, names: list[str]) -> list:
 def test_defaults_files_renames_and_namespaces(tmp_path: Path, monkeypatch) -> None:
     conf = tmp_path / "config"
     shutil.copytree(config_dir(), conf)
-    text = (conf / "torque_node.yaml").read_text().replace("qos_depth: 1000", "qos_depth: 321")
-    (conf / "torque_node.yaml").write_text(text)
+    path = conf / "nodes" / "torque_node.yaml"
+    path.write_text(path.read_text().replace("qos_depth: 1000", "qos_depth: 321"))
     mine = tmp_path / "mine.yaml"
     mine.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"body_size": 95}}}))
     monkeypatch.setenv("FOREARM_DYNAMICS_CONFIG", str(conf))

@@ -1,9 +1,10 @@
 """ROS parameters declared the ROS way: descriptors, ranges, read-only, defaults from YAML.
 
 Every node declares its parameters through `Params`:
-- the defaults are read from the installed `config/<node>.yaml` (section `/**`), so the
-  README's "read once at start-up from config/<node>.yaml" is literally what happens; a
-  `Spec` gives the type (its own default is used only for a setting the YAML leaves out);
+- a `Spec` (spec.py, ROS-free) is the one definition of a parameter; the installed
+  `config/nodes/<node>.yaml` is generated from the Specs (catalog.py) and read as the
+  defaults at start-up (section `/**`), so an installed file can be edited and a test
+  checks the committed files against the Specs, values included;
 - each parameter gets a `ParameterDescriptor`: a description with its unit, `read_only`
   unless the node can apply a change at runtime (`Spec.live`), and a
   `floating_point_range` / `integer_range` where one applies: rclpy itself then refuses an
@@ -14,9 +15,10 @@ Every node declares its parameters through `Params`:
   floating-point parameter (`rate_hz: 1000` in YAML, `-p split:=1`) is taken as that
   number; at runtime rclpy's rule applies (`ros2 param set ... split 1.0`).
 - unknown overrides (a typo, or a parameter of another node in a shared `/**` file) are
-  named in one warning and ignored (undeclared again). They are found with public API
-  only: the node is created with `automatically_declare_parameters_from_overrides=True`
-  (see `NODE_OPTIONS`), so every override is a declared parameter before `Params` runs.
+  named in one warning ("did you mean" a near miss) and ignored (undeclared again). They
+  are found with public API only: the node is created with
+  `automatically_declare_parameters_from_overrides=True` (see `NODE_OPTIONS`), so every
+  override is a declared parameter before `Params` runs.
 
 A refused value at start-up raises ParameterError: one line naming the parameter, and the
 node's runner exits with code 2.
@@ -27,8 +29,6 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import yaml
@@ -44,8 +44,10 @@ from rclpy.exceptions import (
 )
 from rclpy.node import Node
 
-from ..errors import UsageError
-from ..paths import config_file
+from .spec import ParameterError, Spec, did_you_mean, load_defaults, unit_suffix
+
+__all__ = ["NODE_OPTIONS", "ParameterError", "Params", "Spec", "descriptor", "finite", "init_node",
+           "load_defaults"]  # Spec, ParameterError, load_defaults: defined in spec.py (ROS-free)
 
 #: Keyword arguments every node passes to rclpy's Node (see the module docstring).
 NODE_OPTIONS = {"automatically_declare_parameters_from_overrides": True}
@@ -72,90 +74,20 @@ SYSTEM_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"}
 _TYPE_WORDS = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
 
 
-class ParameterError(UsageError, ValueError):
-    """A parameter value the node refuses to start with (the node exits with code 2)."""
-
-    def __init__(self, name: str, why: str):
-        super().__init__(f"invalid parameter '{name}': {why}")
-        self.name = name
-        self.why = why
-
-
-@dataclass(frozen=True)
-class Spec:
-    """One parameter. `default` fixes the type (the value comes from config/<node>.yaml).
-
-    unit: stated in the description ("m", "kg", "s", "Hz", ...; "" for none).
-    lo/hi: the range rclpy enforces (floating_point_range or integer_range by type).
-    choices: the accepted strings (checked by the node: rclpy has no enumerations).
-    live: the node applies a change at runtime; otherwise the parameter is read-only.
-    dynamic: the parameter accepts more than one type (dynamic typing).
-    """
-
-    name: str
-    default: Any
-    description: str
-    unit: str = ""
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple[str, ...] | None = None
-    live: bool = False
-    dynamic: bool = False
-
-    def descriptor(self) -> ParameterDescriptor:
-        text = self.description
-        if self.unit:
-            text += f" [{self.unit}]"
-        if self.choices:
-            text += f" One of: {', '.join(self.choices)}."
-        text += " Can be changed at runtime." if self.live else " Read-only: set at start-up."
-        d = ParameterDescriptor(description=text, read_only=not self.live,
-                                dynamic_typing=self.dynamic)
-        if self.lo is not None and not self.dynamic:
-            if isinstance(self.default, float) or (
-                    isinstance(self.default, list) and self.default and isinstance(self.default[0], float)):
-                d.floating_point_range = [FloatingPointRange(
-                    from_value=float(self.lo), to_value=float(self.hi), step=0.0)]
-            elif isinstance(self.default, int) and not isinstance(self.default, bool):
-                d.integer_range = [IntegerRange(from_value=int(self.lo), to_value=int(self.hi), step=0)]
-        if self.choices:
-            d.additional_constraints = f"one of: {', '.join(self.choices)}"
-        return d
-
-    def check(self, value: Any) -> str | None:
-        """Why `value` is refused beyond what rclpy checks (choices, array ranges), or None."""
-        if self.choices is not None and value not in self.choices:
-            return f"{value!r} is not one of {', '.join(self.choices)}"
-        if isinstance(value, (list, tuple)) and self.lo is not None:
-            bad = [x for x in value if not (self.lo <= x <= self.hi)]
-            if bad:
-                return f"{bad[0]!r} is outside [{self.lo:g}, {self.hi:g}]{_unit(self)}"
-        return None
-
-
-def _unit(spec: Spec) -> str:
-    return f" {spec.unit}" if spec.unit else ""
-
-
-def load_defaults(config_name: str, path: Path | None = None) -> dict[str, Any]:
-    """config/<config_name>.yaml, section `/**` -> ros__parameters, nested keys joined by '.'."""
-    path = path or config_file(f"{config_name}.yaml")
-    data = yaml.safe_load(path.read_text()) or {}
-    try:
-        params = data["/**"]["ros__parameters"]
-    except (KeyError, TypeError):
-        raise ValueError(f"{path}: expected a '/**:' section with 'ros__parameters'") from None
-    out: dict[str, Any] = {}
-
-    def walk(prefix: str, d: dict) -> None:
-        for k, v in d.items():
-            if isinstance(v, dict):
-                walk(f"{prefix}{k}.", v)
-            else:
-                out[f"{prefix}{k}"] = v
-
-    walk("", params)
-    return out
+def descriptor(spec: Spec) -> ParameterDescriptor:
+    """The ROS descriptor of a Spec: its text, read-only unless live, rclpy's range."""
+    d = ParameterDescriptor(description=spec.text(), read_only=not spec.live,
+                            dynamic_typing=spec.dynamic)
+    if spec.lo is not None and not spec.dynamic:
+        if isinstance(spec.default, float) or (
+                isinstance(spec.default, list) and spec.default and isinstance(spec.default[0], float)):
+            d.floating_point_range = [FloatingPointRange(
+                from_value=float(spec.lo), to_value=float(spec.hi), step=0.0)]
+        elif isinstance(spec.default, int) and not isinstance(spec.default, bool):
+            d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=0)]
+    if spec.choices:
+        d.additional_constraints = f"one of: {', '.join(spec.choices)}"
+    return d
 
 
 def _coerce(spec: Spec, value: Any) -> Any:
@@ -185,12 +117,12 @@ class Params:
         try:
             yaml_defaults = load_defaults(config_name)
         except (OSError, yaml.YAMLError, ValueError) as exc:  # a broken install: one line
-            raise ParameterError(f"config/{config_name}.yaml", f"cannot read the defaults: "
+            raise ParameterError(f"config/nodes/{config_name}.yaml", f"cannot read the defaults: "
                                  f"{str(exc).splitlines()[0]}") from None
         extra = sorted(set(yaml_defaults) - set(self.specs))
         if extra:  # a typo in the installed file: a packaging bug, say so plainly
-            raise ParameterError(extra[0], f"in config/{config_name}.yaml but not a parameter of "
-                                 "this node")
+            raise ParameterError(extra[0], f"in config/nodes/{config_name}.yaml but not a "
+                                 "parameter of this node")
         # What the user gave (params files, -p): declared already (NODE_OPTIONS).
         given = {n: node.get_parameter(n).value
                  for n in node.list_parameters([], 0).names if n not in SYSTEM_PARAMETERS}
@@ -203,13 +135,14 @@ class Params:
             coerced = _coerce(s, value)
             try:
                 if coerced is not value:  # an integer for a float: rclpy would refuse the type
-                    node.declare_parameter(s.name, coerced, s.descriptor(), ignore_override=True)
+                    node.declare_parameter(s.name, coerced, descriptor(s), ignore_override=True)
                 else:  # rclpy applies the override and checks its type against the default's
-                    node.declare_parameter(s.name, default, s.descriptor())
+                    node.declare_parameter(s.name, default, descriptor(s))
             except InvalidParameterTypeException:
                 raise ParameterError(s.name, f"must be {_type_word(s.default)}, got {value!r}") from None
             except InvalidParameterValueException:
-                raise ParameterError(s.name, f"{value!r} is outside [{s.lo:g}, {s.hi:g}]{_unit(s)}") from None
+                raise ParameterError(s.name, f"{value!r} is outside [{s.lo:g}, {s.hi:g}]"
+                                     f"{unit_suffix(s)}") from None
             why = s.check(value)
             if why:
                 raise ParameterError(s.name, why)
@@ -221,7 +154,8 @@ class Params:
     def warn_unknown(self) -> None:
         for name in self.unknown:
             self._node.get_logger().warning(
-                f"ignoring unknown parameter '{name}' (not a parameter of this node)")
+                f"ignoring unknown parameter '{name}' (not a parameter of this node"
+                f"{did_you_mean(name, self.specs).replace(' (', '; ').rstrip(')')})")
 
     def value(self, name: str) -> Any:
         return self._node.get_parameter(name).value
