@@ -36,6 +36,6 @@ def test_reproduce_paper_reuses_its_cache_and_reproduces_the_committed_numbers(t
                     for k, v in s.items():  # None where a summary is empty (JSON has no NaN)
                         assert got[k] == (v if v is None else pytest.approx(v, rel=1e-9)), (
                             name, size, group, metric, k)
-    for name in ("fig3.png", "fig4.png", "fig5.png", "fig6.png"):
+    for name in ("fig3.png", "fig4.png", "fig5.png", "fig6.png", "fig7.png"):
         assert (tmp_path / name).stat().st_size > 10_000
     assert (tmp_path / "cache.json").stat().st_size > 1000  # the run's own copy

@@ -171,6 +171,7 @@ def paper_markdown(r: dict) -> str:
             out += [ALL_TABLES[k](r), ""]
     out += ["## Sources checked", "", "| what | source | status |", "|---|---|---|"]
     out += [f"| {a} | {b} | {c} |" for a, b, c in SOURCES_CHECKED]
-    out += ["", ("Figures: `results/paper/fig3.png` … `fig6.png` (fig6: means and paired differences "
-            "with 95 % cluster-bootstrap CIs)."), ""]
+    out += ["", ("Figures: `results/paper/fig3.png` … `fig7.png` (fig6: means and paired differences "
+                 "with 95 % cluster-bootstrap CIs per torque reading and window; fig7: leave one "
+                 "movement out, held out vs fitted on all 65, with CIs)."), ""]
     return "\n".join(out)

@@ -140,3 +140,29 @@ def ci_figure(path: Path, review: dict, models: tuple[str, ...]) -> None:
                  "CIs: cluster bootstrap over the 13 hand movements")
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
+
+
+def lomo_figure(path: Path, lomo: dict) -> None:
+    """Leave-one-movement-out: each fitted placement's pro/sup NRMSE held out beside the
+    all-65 fit on the same movements, mean with its 95 % cluster-bootstrap CI (log scale)."""
+    from .statistics import cluster_bootstrap_mean
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 4.4), constrained_layout=True)
+    clusters = np.repeat(np.arange(1, 14), 5)
+    for x, (name, v) in enumerate(lomo["variants"].items()):
+        for dx, key, label, color in ((-0.12, "held_out_errors", "held out (13 folds)", "tab:red"),
+                                      (0.12, "all_65_fit_errors", "fit on all 65", "0.4")):
+            vals = np.array([np.nan if e is None else e for f in v["folds"]
+                             for e in f[key]["prosup_nrmse"]], float)
+            lo, hi = cluster_bootstrap_mean(vals, clusters)
+            m = float(np.nanmean(vals))
+            ax.errorbar([x + dx], [100 * m], yerr=[[100 * (m - lo)], [100 * (hi - m)]], fmt="o",
+                        capsize=4, color=color, label=label if x == 0 else None)
+    ax.set_xticks(range(len(lomo["variants"])), list(lomo["variants"]), rotation=20, ha="right")
+    ax.set_yscale("log")
+    ax.set_ylabel("pro/sup NRMSE mean (%), 95 % CI")
+    ax.set_title("Leave one hand movement out (mirror kept out), fits from neutral")
+    ax.legend(fontsize=8)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)

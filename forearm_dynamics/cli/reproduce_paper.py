@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         args.docs.parent.mkdir(parents=True, exist_ok=True)
         args.docs.write_text(paper_markdown(json.loads(json.dumps(_clean(results)))), encoding="utf-8")
     bar.close()
-    print(f"wrote {args.out}/results.json, tables.md, fig3.png ... fig6.png in "
+    print(f"wrote {args.out}/results.json, tables.md, fig3.png ... fig7.png in "
           f"{results['wall_time_s']:.1f} s (cache: {cache.hits} hits, {cache.misses} computed; "
           f"load average {load0[0]:.1f})")
     return 0
@@ -240,6 +240,7 @@ def _review_figures(out: Path, results: dict) -> None:
     from ..analysis import plots
 
     plots.ci_figure(out / "fig6.png", results["review"], HEADLINE)
+    plots.lomo_figure(out / "fig7.png", results["lomo"])
 
 
 if __name__ == "__main__":
