@@ -1,7 +1,9 @@
-"""export_urdf as a user runs it: a real process, a real file."""
+"""export_urdf as a user runs it: a real process, a real file; `make demo`'s domain."""
 
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -10,6 +12,8 @@ import pytest
 from forearm_dynamics import build_model
 
 pytestmark = pytest.mark.cli
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def run(*args):
@@ -71,3 +75,15 @@ def test_export_urdf_refuses_bad_personalisation():
         r = run(*args)
         assert r.returncode == 2, (args, r.stderr)
         assert words in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("how,domain", [
+    ({"args": ["ROS_DOMAIN_ID=42"]}, "42"), ({"env": {"ROS_DOMAIN_ID": "44"}}, "44"),
+    ({"env": {"ROS_DOMAIN_ID": "0"}}, "73"), ({}, "73")])
+def test_make_demo_takes_another_domain(how, domain):
+    """`make demo` ran in domain 73 whatever the user asked (hard-coded in the recipe)."""
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"} | how.get("env", {})
+    r = subprocess.run(["make", "-n", "demo", *how.get("args", [])], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 0, r.stderr
+    assert f"ROS_DOMAIN_ID={domain} " in r.stdout.splitlines()[-1], r.stdout

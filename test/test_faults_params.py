@@ -212,7 +212,8 @@ def test_bad_params_file_and_typos(tmp_path) -> None:
             assert "invalid arguments" in p.output() and "Traceback" not in p.output()
         assert typed.wait(30) == 2 and "invalid parameter 'qos_depth'" in typed.output()
         # an unknown name is likely a typo: named in a warning, the node runs on
-        assert typo.wait_for_output("ignoring unknown parameter 'qos_dpeth'", 30), typo.output()
+        assert typo.wait_for_output("ignoring unknown parameter 'qos_dpeth' (not a parameter of "
+                                    "this node; did you mean qos_depth?)", 30), typo.output()
         assert typo.running()
         assert typo.stop(signal.SIGINT) == 0
     finally:

@@ -144,9 +144,9 @@ def _play(procs: rosproc.Procs, bag: Path, *ros_args: str) -> rosproc.NodeProces
 
 
 def _record_while(procs: rosproc.Procs, out: Path, player_bag: Path, player_args: tuple,
-                  *nodes: tuple) -> None:
-    """bag_recorder (and `nodes`, each (executable, *ros_args)) running while bag_player
-    plays player_bag to its end; every process exits 0."""
+                  *nodes: tuple) -> list[rosproc.NodeProcess]:
+    """bag_recorder (and `nodes`, each (executable, *ros_args), returned) running while
+    bag_player plays player_bag to its end; every process exits 0."""
     started = [procs.start(exe, *args) for exe, *args in nodes]
     rec = procs.start("bag_recorder", "-p", f"output:={out}", "-p", f"topics:={TOPICS}")
     for p in started:
@@ -158,6 +158,7 @@ def _record_while(procs: rosproc.Procs, out: Path, player_bag: Path, player_args
     assert rec.stop() == 0, rec.output()
     for p in started:
         assert p.stop() == 0, p.output()
+    return started
 
 
 def test_bag_torques_output_replayed_by_bag_player(offline, procs, tmp_path) -> None:
@@ -186,8 +187,11 @@ def test_mot_bag_replayed_into_the_node_matches_bag_torques(offline, procs, tmp_
     """The .mot's joint_states played into a torque_node with the same settings: its torques
     are bag_torques' (check_bag --baseline, to 1e-9 N·m), sample for sample."""
     live = tmp_path / "live.mcap"
-    _record_while(procs, live, offline["q_bag"], ("-p", "min_subscribers:=2"),
-                  ("torque_node", *NODE_PARAMS, "-p", "estimator:=backward"))
+    [node] = _record_while(procs, live, offline["q_bag"], ("-p", "min_subscribers:=2"),
+                           ("torque_node", *NODE_PARAMS, "-p", "estimator:=backward"))
+    # its start-up line says what it computes with, payload and estimator included
+    assert ("model segmented, body size p95, left arm, payload 0.5 kg, estimator backward; "
+            "config on /torque_node/config") in node.output(), node.output()
     r, rep = check_bag(live, "--baseline", offline["tq_bag"], "--tolerance", "1e-9")
     assert r.returncode == 0, r.stdout + r.stderr
     assert rep["matched"] == N and rep["unmatched_new"] == rep["unmatched_baseline"] == 0

@@ -60,7 +60,8 @@ def _source_start(bag) -> int | None:
 def run(args: argparse.Namespace) -> int:
     out = args.out or args.bag.with_suffix("." + args.format)
     if out.exists() and not args.overwrite:
-        return die(f"{PROG}: error: {out} exists already; refusing to overwrite it (--overwrite)", USAGE)
+        return die(f"{PROG}: error: {out} exists already; refusing to overwrite it "
+                   "(--overwrite replaces it)", USAGE)
     bag = open_bag(args.bag)
     s = read_joint_series(bag, args.topic, JOINT_NAMES, effort=True)
     if not np.isfinite(s.effort).any(axis=0).all():

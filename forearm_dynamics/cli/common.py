@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from ..errors import ForearmDynamicsError, exit_code_of
+from ..errors import ForearmDynamicsError, OutputExists, exit_code_of
 from ..exit_codes import USAGE
 
 
@@ -26,7 +26,11 @@ def guarded(prog: str, run: Callable[[argparse.Namespace], int], args: argparse.
     try:
         return run(args)
     except ForearmDynamicsError as exc:
-        return die(f"{prog}: error: {exc}", exit_code_of(exc))
+        hint = ""
+        if isinstance(exc, OutputExists) and "exists already" in str(exc) \
+                and getattr(args, "overwrite", None) is False:
+            hint = " (--overwrite replaces it)"
+        return die(f"{prog}: error: {exc}{hint}", exit_code_of(exc))
     except (OSError, ValueError, KeyError) as exc:
         return die(f"{prog}: error: {exc}", USAGE)
     except Exception as exc:  # noqa: BLE001 - a bad file must never end in a traceback

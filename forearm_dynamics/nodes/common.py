@@ -48,7 +48,8 @@ def make_executor(kind: str = "events"):
 
     make bench (section choices, torque_node at 1 kHz): events 15.7 % CPU, latency p50
     0.263 ms; single-threaded 36.1 %, 0.320 ms. The MultiThreadedExecutor is not offered:
-    with a timer and a busy subscription it collapses to tens of Hz (ROS-NOTES).
+    with a timer and a busy subscription it collapses to tens of Hz (docs/design-notes.md,
+    "Executors").
     """
     if kind == "events":
         from rclpy.experimental import EventsExecutor

@@ -221,6 +221,13 @@ class ModelBundle:
     std: TorqueStd | None = None  # the torque σ, when asked for and the estimator has a covariance
     std_config: dict | None = None  # what the config message says about it
 
+    def summary(self) -> str:
+        """What the log lines say the node computes with: model, size, side, payload, estimator."""
+        arm = self.arm
+        payload = "empty hand" if arm.payload is None else f"payload {arm.payload.mass:g} kg"
+        return (f"model {arm.kind}, body size {arm.body_size.label}, {arm.side} arm, {payload}, "
+                f"estimator {self.request.estimator}")
+
 
 def build_bundle(request: ModelRequest, config_id: int, n: int,
                  previous: ModelBundle | None = None, std: str | None = None) -> ModelBundle:

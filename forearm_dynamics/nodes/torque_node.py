@@ -106,8 +106,7 @@ class TorqueNode(JointStreamNode):
             self.create_timer(0.5 / self.output_rate_hz, self._on_tick)
         b = self.live.in_use
         self.get_logger().info(
-            f"model {b.arm.kind}, body size {b.arm.body_size.label}, estimator "
-            f"{b.request.estimator}; config on {self.config_pub.topic_name}"
+            f"{b.summary()}; config on {self.config_pub.topic_name}"
             + (f"; output at {self.output_rate_hz:g} Hz" if self.output_rate_hz > 0 else "")
         )
 
@@ -309,8 +308,7 @@ class TorqueNode(JointStreamNode):
         self._publish_config(b, None)  # built: stated at once; applied from its first sample
         self.live.built(b)
         self.get_logger().info(f"config {b.config_id} built in {b.build_ms:.1f} ms "
-                               f"({b.arm.kind}, body size {b.arm.body_size.label}); "
-                               "applies from the next sample")
+                               f"({b.summary()}); applies from the next sample")
 
     # -- config message and diagnostics --------------------------------------------------
     def config_message(self, b: ModelBundle, applies_from: int | None) -> dict:
