@@ -196,6 +196,10 @@ def latency_lines(report: CheckReport, th: Thresholds) -> list[str]:
     return lines
 
 
+#: A per-movement model NRMSE above this (a fraction) gets the note on its normalisation.
+PER_MOVEMENT_NOTE = 0.10
+
+
 def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, out=None) -> None:
     """The human report: every number with its unit; notes only where there is one."""
     out = out or sys.stdout
@@ -228,6 +232,13 @@ def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, ou
         p("model NRMSE by DOF group, % (RMSE / the DOF's largest reference peak-to-peak; "
           "median / max): " + ", ".join(
               f"{g} {_pct(s['median'])}/{_pct(s['max'])}" for g, s in report.model_groups.items()))
+        worst = [r.worst(r.model_nrmse, names)[0] for r in report.movements
+                 if r.model_nrmse is not None]
+        if any(np.isfinite(w) and w > PER_MOVEMENT_NOTE for w in worst):
+            p("  (the table's model column divides by that movement's own reference peak-to-peak, "
+              "the paper's metric: a DOF that barely moves there, e.g. an elbow held still, reads "
+              "tens of % for an error of a few mN·m; the pass/fail gate is this line, normalised "
+              "by the DOF's largest peak-to-peak over all movements: config/check.yaml)")
     d = report.delivery
     p(f"delivery: joint_states {_n(d.joint_states)} "
       f"({_num(d.rate_hz.get('joint_states', math.nan), '.1f')} Hz), joint_torques "
