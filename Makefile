@@ -82,7 +82,7 @@ reference: setup
 	$(VENV)/bin/make_reference
 
 reproduce: setup
-	$(VENV)/bin/reproduce_paper --out results/paper --readme README.md --docs docs/paper.md
+	$(VENV)/bin/reproduce_paper --out results/paper --docs docs/paper.md --blocks docs/paper-discussion.md
 
 # Offline estimator benchmark (no ROS, a few minutes): the `estimation` key of
 # benchmarks/results.json and benchmarks/estimation.png

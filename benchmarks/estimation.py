@@ -229,7 +229,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(HERE / "results.json"))
     ap.add_argument("--figure", default=str(HERE / "estimation.png"))
     ap.add_argument("--table", action="store_true",
-                    help="print the README tables from --out (no benchmark run)")
+                    help="print the docs/estimation.md tables from --out (no benchmark run)")
     args = ap.parse_args(argv)
     if args.table:
         print(tables(json.loads(Path(args.out).read_text(encoding="utf-8"))["estimation"]))

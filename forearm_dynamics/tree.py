@@ -135,7 +135,7 @@ def mirror_tree(tree: KinematicTree) -> KinematicTree:
     becomes -S a and the same angle q gives the mirrored posture. Every frame stays parallel
     to the world at q = 0 (rotation I, det +1): the mirror lives in the numbers, never in a
     left-handed frame. Gravity is the world's and is left as it is; it lies in the mirror
-    plane (-y), so mirrored motions need the same joint torques (see the README).
+    plane (-y), so mirrored motions need the same joint torques (docs/models.md, "The left arm").
     """
     if tree.side not in SIDES:
         raise ValueError(f"side must be one of {SIDES}, got {tree.side!r}")

@@ -162,15 +162,18 @@ def test_default_placement_is_what_the_results_report(results):
             assert spec.split == pytest.approx(fitted["split"], abs=5e-5)
 
 
-def test_readme_and_tables_quote_results_json(results):
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+def test_docs_and_tables_quote_results_json(results):
+    """docs/paper-discussion.md's generated blocks (reproduce_paper --blocks) and tables.md
+    are results.json's; the README holds none (reproduce_paper never writes it)."""
+    assert "<!-- generated:" not in (ROOT / "README.md").read_text(encoding="utf-8")
+    readme = (ROOT / "docs" / "paper-discussion.md").read_text(encoding="utf-8")
     tables = (RESULTS / "tables.md").read_text(encoding="utf-8")
     assert tables == tables_markdown(results)
     for key, fn in GENERATED.items():
         start, end = _block(key)
         assert start in readme and end in readme, key
         body = readme[readme.index(start) + len(start):readme.index(end)].strip()
-        assert body == fn(results), f"README block {key} differs from results.json"
+        assert body == fn(results), f"docs/paper-discussion.md block {key} differs from results.json"
     # and the prose's own headline numbers: the solid / oblique pro/sup means
     head = readme[readme.index(_block("paper-headline")[0]):]
     for name in ("solid", "oblique"):

@@ -23,7 +23,7 @@ EXAMPLES = ROOT / "examples"
 
 def _readme_python_snippet() -> str:
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text.split("## Python API", 1)[1].split("\n## ", 1)[0]
+    section = text.split("## Quick start: Python", 1)[1].split("\n## ", 1)[0]
     blocks = re.findall(r"```python\n(.*?)```", section, flags=re.DOTALL)
     assert len(blocks) == 1, "the Python API section has one python block"
     return blocks[0]

@@ -6,7 +6,7 @@ trajectory_publisher plays movements as a motion-capture-like sensor (100 Hz, 0.
 Gaussian noise on every position, no velocities); torque_node runs with no parameter at all.
 Its torques are scored against the noiseless truth (the model's inverse dynamics of the
 analytic movement at each output stamp), globally normalised per DOF as in the estimation
-benchmark (benchmarks/estimation.py; README "Measured input"). The bound comes from that
+benchmark (benchmarks/estimation.py; docs/estimation.md). The bound comes from that
 benchmark: at 100 Hz and 0.5 deg the default estimator gives about 10 % (elbow) and 5 %
 (pro/sup) over the 65 movements, normalised by the library's range; these three movements,
 normalised by their own range, gave 15 % / 14 % offline for five noise seeds (the backward

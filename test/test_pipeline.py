@@ -165,7 +165,7 @@ def test_rosbags_reads_every_pair(run):
         for conn, _t, raw in reader.messages():
             if conn.topic in stamps:
                 # rosbags reads the header alone: a JointState with an empty effort sequence,
-                # as Fast-CDR pads it, trips its full decoder (see README, "Bags").
+                # as Fast-CDR pads it, trips its full decoder (docs/ros.md, bag_recorder).
                 sec, nsec = np.frombuffer(raw[4:12], dtype="<u4")
                 stamp = int(sec) * 10**9 + int(nsec)
                 stamps[conn.topic].append(stamp)

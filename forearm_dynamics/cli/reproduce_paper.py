@@ -97,8 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-cache", action="store_true", help="ignore and do not write the cache")
     ap.add_argument("--docs", type=Path, default=None,
                     help="write the reviewed comparison (verdict, statistics, every table) to this file")
-    ap.add_argument("--readme", type=Path, default=None,
-                    help="rewrite the generated tables between the paper markers of this README")
+    ap.add_argument("--blocks", "--readme", dest="blocks", type=Path, default=None,
+                    help="rewrite the generated tables between the `generated` markers of this "
+                         "Markdown file (make reproduce: docs/paper-discussion.md)")
     args = ap.parse_args(argv)
     try:
         args.out.mkdir(parents=True, exist_ok=True)
@@ -106,8 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         (args.out / ".write_test").unlink()
     except OSError as exc:
         return die(f"reproduce_paper: cannot write to {args.out}: {exc.strerror or exc}")
-    if args.readme is not None and not args.readme.is_file():
-        return die(f"reproduce_paper: no README at {args.readme}")
+    if args.blocks is not None and not args.blocks.is_file():
+        return die(f"reproduce_paper: no file at {args.blocks} (--blocks)")
     t0 = time.perf_counter()
     load0 = os.getloadavg()
     bar = Progress(sys.stderr.isatty())
@@ -180,8 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     results["load_average"] = {"start": list(load0), "end": list(os.getloadavg())}
     write_json(args.out / "results.json", results)
     (args.out / "tables.md").write_text(tables_markdown(results), encoding="utf-8")
-    if args.readme is not None:
-        update_readme(args.readme, results)
+    if args.blocks is not None:
+        update_readme(args.blocks, results)
     if args.docs is not None:
         from ..analysis.paper_doc import paper_markdown
 
