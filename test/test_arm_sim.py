@@ -50,11 +50,11 @@ def command(names, effort) -> JointState:
 class Sim:
     """One arm_sim process and a peer that commands it and collects what it publishes."""
 
-    def __init__(self, *params: str):
+    def __init__(self, procs, *params: str):
         # a domain of its own: the module's lockstep node runs while the other tests run
         domain = rosproc.test_domain(102, 214)
         args = [a for p in ("diagnostics_period:=0.2", *params) for a in ("-p", p)]
-        self.proc = rosproc.start("arm_sim", *args, domain=domain)
+        self.proc = procs.start("arm_sim", *args, domain=domain)  # killed even on failure
         self.peer = rosproc.Peer(f"arm_sim_test_{next(_PEERS)}", domain=domain)
         node = self.peer.node
         self.pub = node.create_publisher(JointState, "joint_commands", stream_qos(1000))
@@ -91,8 +91,8 @@ class Sim:
 
 
 @pytest.fixture(scope="module")
-def lockstep():
-    s = Sim("lockstep:=true")
+def lockstep(module_procs):
+    s = Sim(module_procs, "lockstep:=true")
     yield s
     s.close()
 
@@ -163,8 +163,8 @@ def test_lockstep_one_step_per_command_bit_for_bit(lockstep) -> None:
     print(f"lockstep round trips through DDS (test peer, one at a time): {rate:.0f} steps/s")
 
 
-def test_command_timeout_zeroes_the_torque() -> None:
-    s = Sim("command_timeout:=0.3")
+def test_command_timeout_zeroes_the_torque(procs) -> None:
+    s = Sim(procs, "command_timeout:=0.3")
     try:
         s.wait(lambda: s.pub.get_subscription_count() > 0 and len(s.states) > 10, what="states")
         push = command(("elbow_flexion",), [1.0])
@@ -195,8 +195,8 @@ def test_command_timeout_zeroes_the_torque() -> None:
         s.close()
 
 
-def test_unstable_damping_is_refused_with_one_line() -> None:
-    proc = rosproc.start("arm_sim", "-p", "damping:=0.01")
+def test_unstable_damping_is_refused_with_one_line(procs) -> None:
+    proc = procs.start("arm_sim", "-p", "damping:=0.01")
     code = proc.wait(30.0)
     out = proc.output()
     assert code == 2, out
@@ -205,10 +205,10 @@ def test_unstable_damping_is_refused_with_one_line() -> None:
     assert "Traceback" not in out
 
 
-def test_parameters_reach_the_simulation() -> None:
+def test_parameters_reach_the_simulation(procs) -> None:
     """Model parameters (torque_node's), initial_posture.<joint>, damping.<joint> and method
     are what the simulation runs with: 50 lockstep steps equal the core's, bit for bit."""
-    s = Sim("lockstep:=true", "model:=anatomical", "body_size:=95", "side:=left",
+    s = Sim(procs, "lockstep:=true", "model:=anatomical", "body_size:=95", "side:=left",
             "payload_mass:=0.5", "method:=semi_implicit_euler", "initial_posture.elbow_flexion:=1.0",
             "damping.elbow_flexion:=0.01", "joint_limits:=false")
     try:

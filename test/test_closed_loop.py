@@ -15,6 +15,7 @@ load 20 on 2 cores). PD alone (--no-feedforward) misses by 0.74-0.94 rad (real t
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -22,18 +23,29 @@ from pathlib import Path
 import pytest
 import rosproc
 
+from forearm_dynamics.processes import popen
+
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_closed_loop_example_tracks_three_movements(tmp_path) -> None:
+def test_closed_loop_example_tracks_three_movements(tmp_path, procs) -> None:
     domain = rosproc.test_domain(102, 214)
     out = tmp_path / "run"
-    proc = subprocess.run(
+    # the example stops the nodes it started when it ends or gets SIGINT; procs kills it
+    # (by PID) if even that fails
+    example = procs.add(popen(
         [sys.executable, str(ROOT / "examples" / "closed_loop.py"), "--movements", "1,26,51",
          "--out", str(out), "--domain", str(domain), "--lockstep"],
-        env=rosproc.ros_env(domain), capture_output=True, text=True, timeout=300, check=False)
+        env=rosproc.ros_env(domain), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+    try:
+        stdout, stderr = example.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        example.send_signal(signal.SIGINT)  # its finally stops its children
+        stdout, stderr = example.communicate(timeout=60)
+        pytest.fail(f"the example took more than 300 s\n{stdout}\n{stderr}")
+    proc = subprocess.CompletedProcess(example.args, example.returncode, stdout, stderr)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
     res = json.loads((out / "results.json").read_text())
