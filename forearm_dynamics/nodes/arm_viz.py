@@ -57,8 +57,10 @@ class ArmVizNode(Node):
         self.description_pub = self.create_publisher(String, s.description_topic, latched_qos())
         self._view = view_values(self.params.values(LIVE_VIEW))
         self._use(own_model(self.params.values(MODEL_NAMES)), "own parameters")
-        self.create_subscription(JointState, s.torque_topic, self._torques.keep, stream_qos(10),
-                                 raw=True)
+        # Best effort, depth 1: only the newest torques are drawn, and a best-effort reader
+        # asks nothing of the torque node's writer (no acknowledgements, no resends).
+        self.create_subscription(JointState, s.torque_topic, self._torques.keep,
+                                 stream_qos(1, reliable=False), raw=True)
         if s.config_topic:
             self.create_subscription(String, s.config_topic, self._on_config, latched_qos())
         self.add_on_set_parameters_callback(self._on_set)
