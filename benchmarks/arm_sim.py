@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from benchmarks.procstat import Sampler
 from benchmarks.stats import (
     claim_domain_arg,
     loadavg,
@@ -54,7 +55,7 @@ from benchmarks.stats import (
 )
 from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.codec.jointstate_cdr import STAMP, OutputTemplate
-from forearm_dynamics.processes import Child, Sampler, ros_env
+from forearm_dynamics.processes import Child, ros_env
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -119,9 +119,10 @@ def _intervals(path: Path) -> dict:
 def arm_sim_run(mode: str, hogs: int, seconds: float, domain: int, work: Path,
                 hog_limit: float) -> dict:
     """arm_sim in real-time mode (1 kHz steps, zero torque) timed at a FIFO-60 receiver."""
-    from forearm_dynamics.processes import Sampler, ros_env
+    from forearm_dynamics.processes import ros_env
 
     from . import module_env
+    from .procstat import Sampler
 
     logs = work / f"arm_sim_{mode}_h{hogs}"
     env = ros_env(domain, logs)

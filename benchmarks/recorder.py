@@ -21,7 +21,8 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from forearm_dynamics.processes import Child, Sampler, ros_env
+from benchmarks.procstat import Sampler
+from forearm_dynamics.processes import Child, ros_env
 
 from . import module_env
 

@@ -41,8 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.procstat import Sampler
 from forearm_dynamics.exit_codes import DATA, OK
-from forearm_dynamics.processes import Child, Sampler, ros_env
+from forearm_dynamics.processes import Child, ros_env
 
 from .stats import claim_domain_arg, loadavg, machine_info, percentiles
 

@@ -57,9 +57,10 @@ import numpy as np
 if __package__ in (None, ""):  # `python benchmarks/torque_node_rate.py` from the repo root
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from benchmarks.procstat import proc_stat
 from benchmarks.stats import claim_domain_arg, loadavg, machine_info, merge_results, percentiles, write_json
 from forearm_dynamics.exit_codes import DATA, OK
-from forearm_dynamics.processes import Child, proc_stat, ros_env
+from forearm_dynamics.processes import Child, ros_env
 
 MS = 1_000_000
 RATE_HZ = 1000.0

@@ -34,8 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.procstat import Sampler
 from forearm_dynamics.movements import get_movement
-from forearm_dynamics.processes import Child, Sampler, ros_env
+from forearm_dynamics.processes import Child, ros_env
 
 from . import module_env
 from .stats import percentiles

@@ -12,7 +12,8 @@ import time
 
 import pytest
 
-from forearm_dynamics.processes import Child, Sampler, claim_domain, lease_domain, proc_stat, ros_env
+from benchmarks.procstat import Sampler, proc_stat
+from forearm_dynamics.processes import Child, claim_domain, lease_domain, ros_env
 
 pytestmark = pytest.mark.cli
 

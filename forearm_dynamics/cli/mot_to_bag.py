@@ -21,11 +21,9 @@ import sys
 import time
 from pathlib import Path
 
-from rclpy.serialization import serialize_message
-from sensor_msgs.msg import JointState
-
 from ..bag import BagWriter, TopicQos
 from ..codec.jointstate import tidy
+from ..codec.ros import message, serialize
 from ..description import JOINT_NAMES
 from ..exit_codes import OK, USAGE
 from ..formats.opensim import CoordinateMap, map_motion, read_motion
@@ -67,14 +65,14 @@ def run(args: argparse.Namespace) -> int:
     with BagWriter(args.output, overwrite=args.overwrite) as w:
         w.add_metadata(METADATA, {k: json.dumps(v) for k, v in info.items()})
         ch = w.add_topic("/" + args.topic.strip("/"), "sensor_msgs/msg/JointState", TopicQos(depth=1000))
-        msg = JointState()
+        msg = message("JointState")()
         msg.header.frame_id = args.frame_id
         msg.name = list(JOINT_NAMES)
         for k, stamp in enumerate(stamps):
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
             msg.position = mm.q[k].tolist()
             msg.velocity = [] if mm.qd is None else mm.qd[k].tolist()
-            w.write(ch, tidy(serialize_message(msg)), stamp)
+            w.write(ch, tidy(serialize(msg)), stamp)
     dt = float(mm.time[-1] - mm.time[0]) / max(len(mm.time) - 1, 1)
     print(f"{PROG}: {len(stamps)} rows of {motion.kind} file {args.motion} ("
           f"{'degrees' if motion.in_degrees else 'radians'}, {1 / dt if dt > 0 else 0:.1f} Hz, "

@@ -17,11 +17,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import JointState
 
 from ..errors import BagNoData, ForeignBag, SchemaError
 from .jointstate_cdr import Layout, NotMine, parse_layout, verify_layout
+from .ros import deserialize
 
 FIELDS = ("position", "velocity", "effort")
 
@@ -127,7 +126,7 @@ class JointStateReader:
 
     def _decode(self, data: bytes) -> tuple:
         try:
-            m = deserialize_message(bytes(data), JointState)
+            m = deserialize(bytes(data), "JointState")
         except Exception as exc:  # noqa: BLE001 - rclpy raises several types
             raise SchemaError(f"{self.where}: message {len(self._which)} does not decode as "
                               f"JointState ({type(exc).__name__})") from None
@@ -243,7 +242,7 @@ class TorqueReader:
         if bytes(data[:4]) == b"\x00\x01\x00\x00":
             return int.from_bytes(data[4:8], "little", signed=True) * 1_000_000_000 + \
                 int.from_bytes(data[8:12], "little")
-        m = deserialize_message(data, JointState)
+        m = deserialize(data, "JointState")
         return m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
 
     def decode(self, joint_names: tuple[str, ...]) -> tuple[int, np.ndarray, np.ndarray]:
@@ -261,7 +260,7 @@ class TorqueReader:
             sec, nsec = np.frombuffer(data, "<i4", 1, 4)[0], np.frombuffer(data, "<u4", 1, 8)[0]
             stamp = int(sec) * 1_000_000_000 + int(nsec)
         else:  # big-endian or otherwise unusual bytes: the general decoder
-            m = deserialize_message(data, JointState)
+            m = deserialize(data, "JointState")
             names, pos, eff = tuple(m.name), np.array(m.position), np.array(m.effort)
             stamp = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
         if len(pos) != len(names) or len(eff) != len(names):

@@ -33,8 +33,8 @@ import struct
 from dataclasses import dataclass
 
 import numpy as np
-from rclpy.serialization import deserialize_message, serialize_message
-from sensor_msgs.msg import JointState
+
+from .ros import deserialize, message, serialize
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR (XCDR1), little endian
 STAMP = struct.Struct("<iI")  # builtin_interfaces/Time at byte 4
@@ -188,7 +188,7 @@ def _same(a, b) -> bool:
 
 def verify_layout(lay: Layout, data) -> None:
     """Check `lay` field by field against rclpy's deserialiser; NotMine if they disagree."""
-    msg = deserialize_message(bytes(data), JointState)
+    msg = deserialize(bytes(data), "JointState")
     sec, nsec = STAMP.unpack_from(data, 4)
     ok = (
         (msg.header.stamp.sec, msg.header.stamp.nanosec) == (sec, nsec)
@@ -219,14 +219,14 @@ class OutputTemplate:
 
     def __init__(self, joint_names, frame_id: str = "", effort: bool = True, velocity: bool = True):
         n = len(joint_names)
-        msg = JointState()
+        msg = message("JointState")()
         msg.header.frame_id = frame_id
         msg.name = list(joint_names)
         # distinct values so the check below proves each view points at its own field
         msg.position = [1.0 + i for i in range(n)]
         msg.velocity = [-1.0 - i for i in range(n)] if velocity else []
         msg.effort = [math.pi * (i + 1) for i in range(n)] if effort else []
-        raw = serialize_message(msg)
+        raw = serialize(msg)
         self.layout = lay = verified_layout(raw)
         if (lay.names != tuple(joint_names) or lay.n_pos != n or lay.n_vel != (n if velocity else 0)
                 or lay.n_eff != (n if effort else 0)):

@@ -10,12 +10,9 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.serialization import deserialize_message
-from std_msgs.msg import String
-
 from ..bag.reader import Bag
 from ..codec.jointstate import JointSeries, JointStateReader
+from ..codec.ros import deserialize
 
 JOINT_STATES = "joint_states"
 JOINT_TORQUES = "joint_torques"
@@ -67,7 +64,7 @@ def read_config(bag: Bag) -> tuple[dict | None, list[str]]:
         return None, []
     config, warnings = None, []
     for _ch, msg in bag.messages([ch.topic]):
-        text = deserialize_message(msg.data, String).data
+        text = deserialize(msg.data, "String").data
         try:
             config = json.loads(text)
         except ValueError as exc:
@@ -96,7 +93,7 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
         elif key == JOINT_STATES:
             states.add(msg.data, msg.log_time)
         elif key == MOVEMENT:
-            text = deserialize_message(msg.data, String).data
+            text = deserialize(msg.data, "String").data
             try:
                 markers.append(_marker(text))
             except (ValueError, KeyError, TypeError) as exc:
@@ -120,7 +117,7 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
 def _load_average(data: bytes) -> list[float]:
     """The torque node's load_average_1min values in one DiagnosticArray (none if absent)."""
     try:
-        msg = deserialize_message(data, DiagnosticArray)
+        msg = deserialize(data, "DiagnosticArray")
     except Exception:  # noqa: BLE001 - a damaged diagnostics message only loses the load figure
         return []
     out = []

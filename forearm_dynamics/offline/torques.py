@@ -24,8 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from rclpy.serialization import serialize_message
-from std_msgs.msg import String
 
 from .. import model_config
 from ..bag.reader import open_bag
@@ -34,6 +32,7 @@ from ..bag.rosbag2_meta import TopicQos
 from ..bag.writer import BagWriter
 from ..codec.jointstate import JointSeries, read_joint_series
 from ..codec.jointstate_cdr import OutputTemplate
+from ..codec.ros import message, serialize
 from ..dynamics import ArmModel
 from ..errors import ForeignBag, OutputExists, UsageError
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
@@ -160,7 +159,7 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
         cfg = writer.add_topic("/" + config_topic.strip("/"), "std_msgs/msg/String",
                                TopicQos(depth=1, durability="transient_local"))
         first_log = int(res.log_ns.min()) if len(res.log_ns) else info.start_ns
-        writer.write(cfg, serialize_message(String(data=json.dumps(config))), first_log)
+        writer.write(cfg, serialize(message("String")(data=json.dumps(config))), first_log)
         templates: dict[str, OutputTemplate] = {}
 
         def emit(k: int) -> None:
