@@ -202,6 +202,11 @@ def test_without_a_torque_node_its_own_model_is_drawn_and_follows_its_parameters
         assert drawn(build_model("segmented", 50, side="left"), sent), viz.output()
         assert _set(peer, "arm_viz", body_size="female_5").successful
         assert drawn(build_model("segmented", "female_5", side="left"), sent), viz.output()
+        # a config that names no buildable model: one warning, the drawn arm stays
+        cfg_pub = node.create_publisher(String, "torque_node/config", latched_qos())
+        cfg_pub.publish(String(data='{"schema": 2, "model": "octopus"}'))
+        assert viz.wait_for_output("ignoring a config message", 20), viz.output()
+        assert drawn(build_model("segmented", "female_5", side="left"), sent), viz.output()
         # torques without the model's joints: one warning, the node keeps running
         bad = JointState(name=["elbow_flexion"], position=[0.1], effort=[0.2])
         pub.publish(bad)
