@@ -45,6 +45,7 @@ setup(
         "scipy>=1.11",
         "threadpoolctl>=3.1",  # one BLAS thread in the nodes (nodes/common.py run())
         "mcap>=1.5",  # Writer.flush() (public) first in 1.5.0
+        "zstandard>=0.20",  # bag/augment.py (bag_viz) recompresses chunks; mcap needs it too
         "ros-jazzy-rclpy",
         "ros-jazzy-rmw-fastrtps-cpp",
         "ros-jazzy-sensor-msgs",
