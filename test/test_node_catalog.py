@@ -60,3 +60,22 @@ def test_did_you_mean() -> None:
     names = [s.name for s in catalog.specs_of("torque_node")]
     assert did_you_mean("bodysize", names) == " (did you mean body_size?)"
     assert did_you_mean("banana", names) == ""
+
+
+def test_settings_dataclasses_read_only_declared_parameters() -> None:
+    """Each node's settings dataclass (from_params, as rosbag2's PlayOptions) has a field per
+    parameter it reads, named as the Spec: a field without a Spec cannot slip in, and the
+    defaults of the Specs make valid settings (built ROS-free, from a dict)."""
+    import dataclasses
+
+    from forearm_dynamics.nodes import bag_player, bag_recorder, torque_config
+
+    for cls, specs in ((bag_player.PlaySettings, bag_player.SPECS),
+                       (bag_recorder.RecordSettings, bag_recorder.SPECS),
+                       (torque_config.OutputSettings, torque_config.OUTPUT_SPECS)):
+        names = {s.name for s in specs}
+        fields = {f.name for f in dataclasses.fields(cls)}
+        assert fields <= names, (cls.__name__, fields - names)
+        made = cls.from_values({s.name: s.default for s in specs})
+        assert {f: getattr(made, f) for f in fields} == {s.name: s.default for s in specs
+                                                         if s.name in fields}

@@ -43,6 +43,8 @@ out = {"failed": {}, "imported": 0, "help": {}}
 names = [m.name for m in pkgutil.walk_packages(forearm_dynamics.__path__, "forearm_dynamics.")
          if not m.name.startswith(("forearm_dynamics.nodes", "forearm_dynamics.cli"))]
 names += [f"forearm_dynamics.cli.{t}" for t in TOOLS]
+# the parameter tables and the torque node's live model are ROS-free too
+names += [f"forearm_dynamics.nodes.{m}" for m in ("spec", "catalog", "torque_config", "live_model")]
 for name in names:
     try:
         importlib.import_module(name)

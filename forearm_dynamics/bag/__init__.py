@@ -1,4 +1,6 @@
-"""All bag I/O of the package: MCAP files that `ros2 bag` (rosbag2, Jazzy) and rosbags read.
+"""The MCAP container, and only it: files that `ros2 bag` (rosbag2, Jazzy) and rosbags read.
+
+What a message's bytes mean is codec/'s business; what a recording says, offline/'s.
 
 - BagWriter: chunked zstd MCAP, ros2 profile, rosbag2 schemas/channel metadata/metadata.
 - open_bag: validation first (empty, not MCAP, truncated), then reading; truncated files

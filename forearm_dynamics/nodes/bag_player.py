@@ -35,6 +35,7 @@ import struct
 import sys
 import threading
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import rclpy
@@ -54,6 +55,7 @@ from ..exit_codes import USAGE
 from .common import run
 from .params import ParameterError, Params, Spec, init_node
 from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
+from .spec import Settings
 
 NAME = "bag_player"
 PROGRESS_PERIOD_NS = 500_000_000
@@ -105,11 +107,27 @@ def clock_bytes(t_ns: int) -> bytes:
     return _CLOCK.pack(b"\x00\x01\x00\x00", sec, nsec)
 
 
-def _strings(p: Params, name: str) -> list[str]:
-    v = p.value(name)
-    if not isinstance(v, (list, tuple)) or not v or not all(isinstance(x, str) and x for x in v):
-        raise ParameterError(name, f"must be a non-empty list of topic names, got {v!r}")
-    return list(v)
+@dataclass(frozen=True)
+class PlaySettings(Settings):
+    """What bag_player is asked to do (its SPECS, read once at start-up)."""
+
+    topics: list[str]
+    rate: float
+    loop: bool
+    start_offset: float
+    timing: str
+    restamp: bool
+    clock: bool
+    min_subscribers: int
+    subscriber_timeout: float
+    start_delay: float
+    drain: float
+    busy_wait_us: int
+
+    def __post_init__(self) -> None:
+        v = self.topics
+        if not isinstance(v, (list, tuple)) or not v or not all(isinstance(x, str) and x for x in v):
+            raise ParameterError("topics", f"must be a non-empty list of topic names, got {v!r}")
 
 
 def _check_decodes(pl: Playlist, classes: list[type]) -> None:
@@ -131,18 +149,12 @@ class BagPlayer(RealtimeNode, Node):
     def __init__(self, bag_path: str, node_name: str = NAME):
         init_node(self, node_name)
         p = Params(self, SPECS, NAME)  # every parameter read-only: read once at start-up
-        topics = _strings(p, "topics")
-        self.rate = p.value("rate")
-        self.loop = p.value("loop")
-        start_offset = p.value("start_offset")
-        timing = p.value("timing")
-        self.restamp = p.value("restamp")
-        self.clock = p.value("clock")
-        self.min_subscribers = p.value("min_subscribers")
-        self.subscriber_timeout = p.value("subscriber_timeout")
-        self.start_delay = p.value("start_delay")
-        self.drain = p.value("drain")
-        self.busy_wait_ns = 1000 * p.value("busy_wait_us")
+        s = self.settings = PlaySettings.from_params(p)
+        topics, start_offset, timing = list(s.topics), s.start_offset, s.timing
+        self.rate, self.loop, self.restamp, self.clock = s.rate, s.loop, s.restamp, s.clock
+        self.min_subscribers, self.subscriber_timeout = s.min_subscribers, s.subscriber_timeout
+        self.start_delay, self.drain = s.start_delay, s.drain
+        self.busy_wait_ns = 1000 * s.busy_wait_us
         self.realtime_req = realtime_request(p)  # applied by run() before the spin
         p.warn_unknown()
         try:

@@ -49,6 +49,7 @@ from ..exit_codes import DATA, OK
 from .common import CONFIG_TOPIC, latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, Spec, init_node
 from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
+from .spec import Settings
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
@@ -91,11 +92,27 @@ class TopicPlan:
     latched: bool
 
 
-def _strings(p: Params, name: str) -> list[str]:
-    v = p.value(name)
+def _strings(name: str, v) -> list[str]:
     if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) and x for x in v):
         raise ParameterError(name, f"must be a list of non-empty strings, got {v!r}")
     return list(v)
+
+
+@dataclass(frozen=True)
+class RecordSettings(Settings):
+    """What bag_recorder is asked to do (its SPECS, read once at start-up)."""
+
+    topics: list[str]
+    latched_topics: list[str]
+    output: str
+    qos_depth: int
+    chunk_size: int
+    flush_period: float
+    compression: str
+
+    def __post_init__(self) -> None:
+        _strings("topics", self.topics)
+        _strings("latched_topics", self.latched_topics)
 
 
 def _known_type(topic: str) -> type | None:
@@ -140,12 +157,10 @@ class BagRecorder(RealtimeNode, Node):
     def __init__(self, node_name: str = "bag_recorder"):
         init_node(self, node_name)
         p = Params(self, SPECS, "bag_recorder")
-        plans = plan_topics(_strings(p, "topics"), _strings(p, "latched_topics"))
-        depth = p.value("qos_depth")
-        chunk_size = p.value("chunk_size")
-        flush_period = p.value("flush_period")
-        compression = p.value("compression")
-        output = p.value("output")
+        s = self.settings = RecordSettings.from_params(p)
+        plans = plan_topics(list(s.topics), list(s.latched_topics))
+        depth, chunk_size, flush_period = s.qos_depth, s.chunk_size, s.flush_period
+        compression, output = s.compression, s.output
         self.realtime_req = realtime_request(p)  # applied by run() before the spin
         p.warn_unknown()
         resolved = []

@@ -13,11 +13,12 @@ arm_viz share torque_config.MODEL_SPECS) can use the tables without a ROS graph.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import yaml
 
@@ -79,6 +80,28 @@ class Spec:
             if bad:
                 return f"{bad[0]!r} is outside [{self.lo:g}, {self.hi:g}]{unit_suffix(self)}"
         return None
+
+
+class Settings:
+    """Base of a node's settings dataclass (as rosbag2's PlayOptions): one field per parameter
+    it reads, named as the parameter ('.' -> '_'). ROS-free: `from_values` takes a dict (a
+    test, an offline tool), `from_params` a node's Params; a subclass validates in
+    `__post_init__` (raising ParameterError) and adds derived fields with defaults."""
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, Any]) -> Self:
+        given = {k.replace(".", "_"): v for k, v in values.items()}
+        names = [f.name for f in dataclasses.fields(cls) if f.init]
+        missing = [n for n in names if n not in given and
+                   next(f for f in dataclasses.fields(cls) if f.name == n).default is dataclasses.MISSING]
+        if missing:
+            raise ParameterError(missing[0], "not given")
+        return cls(**{n: given[n] for n in names if n in given})
+
+    @classmethod
+    def from_params(cls, params) -> Self:
+        """From a node's declared parameters (nodes.params.Params)."""
+        return cls.from_values(params.values())
 
 
 def unit_suffix(spec: Spec) -> str:

@@ -33,7 +33,7 @@ from ..model_config import model_config
 from ..paths import config_file
 from ..payload import make_payload
 from ..uncertainty import NoCovariance, TorqueStd
-from .params import ParameterError, Spec
+from .spec import ParameterError, Settings, Spec
 
 SIDES = ("right", "left")
 PLACEMENTS = ("", "paper", "parallel", "oblique")
@@ -100,6 +100,16 @@ OUTPUT_SPECS = (
     Spec("std_topic", "joint_torques_std", "JointState topic of the torques' standard deviations "
          "(remappable too)"),
 )
+
+
+@dataclass(frozen=True)
+class OutputSettings(Settings):
+    """The torque node's output parameters (OUTPUT_SPECS), read once at start-up."""
+
+    output_rate_hz: float
+    input_timeout: float
+    publish_std: bool
+    std_topic: str
 
 
 @dataclass(frozen=True)

@@ -65,6 +65,7 @@ from .torque_config import (
     OUTPUT_SPECS,
     ModelBundle,
     ModelRequest,
+    OutputSettings,
     build_bundle,
 )
 
@@ -119,11 +120,12 @@ class TorqueNode(JointStreamNode):
         self._publish_config(self.live.in_use, 0)
 
     def configure(self, params: Params) -> tuple[str, ...]:
-        self.output_rate_hz = params.value("output_rate_hz")
-        self.input_timeout_ns = round(params.value("input_timeout") * 1e9)
+        out = self.output_settings = OutputSettings.from_params(params)
+        self.output_rate_hz = out.output_rate_hz
+        self.input_timeout_ns = round(out.input_timeout * 1e9)
         self._std_topic = None
         self._std_off_why = "publish_std is false"
-        if params.value("publish_std"):
+        if out.publish_std:
             if self.output_rate_hz > 0:
                 self._std_off_why = ("output_rate_hz > 0: the σ of a prediction between samples is "
                                      "not computed, nothing is published on std_topic")
