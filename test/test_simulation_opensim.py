@@ -23,7 +23,7 @@ from forearm_dynamics.simulation.opensim_reference import opensim_forward
 
 pytest.importorskip("opensim")  # the [reference] extra (installed by make setup)
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.slow  # OpenSim forward dynamics per case: seconds each
 
 TIMES = (0.1, 0.2, 0.3, 0.4, 0.5)
 CASES = {

@@ -137,6 +137,7 @@ def test_lag_vector_is_the_filters_steady_state_error_under_constant_jerk():
     assert lag_per_jerk(k, 0.01, False).shape == (3,)
 
 
+@pytest.mark.slow  # seconds of CPU: not in `-m unit` (docs/testing.md)
 def test_noise_covariance_matches_the_filter_run_on_pure_noise():
     """A still joint seen through 0.5 deg white noise (noise fixed, so the gain is fixed):
     the covariance of the filter's (q, qd, qdd) error over 40 000 samples x 8 joints equals
@@ -218,6 +219,7 @@ def _coverage(arm, every, **kw):
     return hit / tot, math.sqrt(ratio_num / ratio_den)
 
 
+@pytest.mark.slow  # the heaviest unit-module test (~15 s at load 12): not in `-m unit`
 def test_calibrated_sigma_covers_and_the_uncalibrated_ones_do_not(arm):
     """On 9 movements at 100 Hz, 0.5 deg: the calibrated σ covers 90-98 % and is 0.8-1.5x
     the RMSE; the noise covariance alone (no lag part) covers < 90 %, the raw filter P
