@@ -49,6 +49,8 @@ NODE_FIELDS = {
     "deadline_ms": "the node's per-sample deadline (0 = none); misses are counted in /diagnostics",
     "realtime": "the scheduling the node asked for and got (policy, priority, memory lock, CPUs)",
     "std": "the torque σ (joint_torques_std): its topic and parts, or why none is published",
+    "input": "missing_joints (reject | hold), the joints held because the input lacks them "
+             "and the posture (rad) they are held at",
 }
 NODE_KEYS = frozenset(NODE_FIELDS)
 PLACEMENT_KEYS = frozenset({"name", "split", "split_rule", "axis_offset_proximal", "axis_offset_distal",

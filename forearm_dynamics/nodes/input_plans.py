@@ -36,6 +36,7 @@ class InputPlan:
     vel: np.ndarray | None = None  # None: no velocities in the message
     index: np.ndarray | None = None
     rejection: v.Rejection | None = None
+    held: np.ndarray | None = None  # model joints this shape lacks, held (missing_joints: hold)
 
 
 GENERIC = InputPlan(None)
@@ -76,4 +77,5 @@ class InputPlans:
             return InputPlan(lay, rejection=r)
         buf = aligned_buffer(lay.size)
         return InputPlan(lay, buf=memoryview(buf), pos=lay.array(buf, "position"),
-                         vel=lay.array(buf, "velocity") if lay.n_vel else None, index=index)
+                         vel=lay.array(buf, "velocity") if lay.n_vel else None, index=index,
+                         held=self._names.held)

@@ -145,7 +145,12 @@ class JointStreamNode(RealtimeNode, Node):
         self.params.warn_unknown()
 
         self.joint_names = tuple(joint_names)
-        self.names = v.NameMatcher(self.joint_names)
+        hold = self.hold_posture()  # missing_joints: hold -> (n,) posture, else None (reject)
+        self.names = v.NameMatcher(self.joint_names, hold=hold is not None)
+        self._hold = hold
+        self.held_joints: tuple[str, ...] = ()  # held in the last input (missing_joints: hold)
+        #: compute() sets this when its output is the estimate of another stamp (a delay)
+        self.output_stamp_ns: int | None = None
         self.stats = PipelineStats(v.REASONS)
         timed = getattr(self, "output_rate_hz", 0) > 0
         self.deadlines = Deadlines(self.params.value("deadline_ms"),
@@ -257,6 +262,8 @@ class JointStreamNode(RealtimeNode, Node):
                 velocity_given = plan.vel is not None
                 if velocity_given:
                     plan.vel.take(plan.index, out=self.qd)
+                if plan.held is not None:  # missing_joints: hold
+                    self._apply_hold(plan.held, velocity_given)
                     # one reduction for both: NaN/inf in either makes q.qd non-finite
                     if not math.isfinite(q.dot(self.qd)):
                         self._check_finite(True)
@@ -273,6 +280,8 @@ class JointStreamNode(RealtimeNode, Node):
             stats.record(_perf_ns() - t_start, recv_ns - t_ns, 0)
             return
         out = self.out
+        if self.output_stamp_ns is not None:  # the estimate of an earlier sample (a delay)
+            sec, nsec = divmod(self.output_stamp_ns, 1_000_000_000)
         out.pack_stamp(sec, nsec)
         t_pub = _perf_ns()
         self.pub.publish(out.payload())
@@ -286,6 +295,22 @@ class JointStreamNode(RealtimeNode, Node):
             stats.warmup += 1
         stats.record(t_end - t_start, recv_ns - t_ns, t_pub_ns)
         self.deadlines.check_input(recv_ns - t_ns, t_end - t_start)
+
+    def _apply_hold(self, held: np.ndarray, velocity_given: bool) -> None:
+        """The joints the message lacks: held at their posture, at rest (one write each)."""
+        self.q[held] = self._hold[held]
+        if velocity_given:
+            self.qd[held] = 0.0
+        if len(held) != len(self.held_joints):
+            self.held_joints = tuple(self.joint_names[i] for i in held)
+            self.get_logger().info(f"holding {len(held)} joint(s) the input lacks: "
+                                   f"{', '.join(self.held_joints[:6])}"
+                                   + (" ..." if len(held) > 6 else "") + " (missing_joints: hold)")
+
+    def hold_posture(self) -> np.ndarray | None:
+        """missing_joints: hold -> the posture (rad, model order) of the joints an input
+        lacks; None (the default) refuses such inputs. Subclasses with the parameter."""
+        return None
 
     def _check_finite(self, velocity_given: bool) -> None:
         """After a non-finite q.qd (or sum): reject NaN/inf in q or qd (else it was overflow)."""
@@ -330,6 +355,8 @@ class JointStreamNode(RealtimeNode, Node):
         np.frombuffer(pos, dtype=np.float64).take(index, out=self.q)
         if nvel:
             np.frombuffer(vel, dtype=np.float64).take(index, out=self.qd)
+        if self.names.held is not None:
+            self._apply_hold(self.names.held, nvel > 0)
             if not math.isfinite(self.q.dot(self.qd)):
                 self._check_finite(True)
         elif not math.isfinite(self.q.sum()):

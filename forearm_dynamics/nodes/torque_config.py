@@ -21,6 +21,7 @@ import yaml
 
 from ..anthropometry import DIMENSIONS, resolve_body_size
 from ..builders import MODEL_KINDS
+from ..description import JOINT_NAMES
 from ..dynamics import ArmModel, build_model
 from ..estimation import (
     DEFAULT_ESTIMATOR,
@@ -84,6 +85,17 @@ def _model_specs() -> tuple[Spec, ...]:
 
 MODEL_SPECS = _model_specs()
 LIVE = frozenset(s.name for s in MODEL_SPECS)
+
+#: Partial joint sets (a mocap lab's arm, a glove's fingers): read-only
+INPUT_SPECS = (
+    Spec("missing_joints", "reject", "a model joint absent from an input message: reject the "
+         "message (naming the joints), or hold the joint at hold_posture.<joint> with zero "
+         "velocity and acceleration (listed in ~/config and /diagnostics); one sensor per "
+         "node (two sensors with disjoint joint sets on one node are not merged)",
+         choices=("reject", "hold")),
+    *(Spec(f"hold_posture.{j}", 0.0, f"missing_joints: hold: the angle {j} is held at when the "
+           "input lacks it", "rad", -2 * np.pi, 2 * np.pi) for j in JOINT_NAMES),
+)
 
 OUTPUT_SPECS = (
     Spec("output_rate_hz", 0.0, "0 = one output per input; > 0 = publish from a timer at this "
@@ -164,6 +176,10 @@ class ModelRequest:
             make_estimator(req.estimator, 1, req.settings_for(req.estimator))
         except ValueError as exc:
             raise ParameterError("estimator", str(exc)) from None
+        delay = dict(req.estimator_settings).get("delay_s", 0.0)
+        if delay > 0.0 and "delay_s" not in req.settings_for(req.estimator):
+            raise ParameterError("estimator.delay_s", f"{delay:g} s needs an estimator that smooths "
+                                 f"with a delay (kalman); {req.estimator} is causal only")
         return req
 
     def settings_for(self, method: str) -> dict[str, float]:

@@ -60,6 +60,7 @@ from .params import ParameterError, Params
 from .std_output import StdTemplates
 from .stream_node import NODE_CONFIG_TOPIC, RESERVED_TOPICS, STREAM_SPECS, JointStreamNode
 from .torque_config import (
+    INPUT_SPECS,
     LIVE,
     MODEL_SPECS,
     OUTPUT_SPECS,
@@ -79,7 +80,7 @@ _MAX_BACKLOG_S = 0.05
 class TorqueNode(JointStreamNode):
     """Inverse dynamics per sample: pin.rnea on preallocated q, qd, qdd."""
 
-    specs = (*STREAM_SPECS, *OUTPUT_SPECS, *MODEL_SPECS)
+    specs = (*STREAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS, *MODEL_SPECS)
     config_name = "torque_node"
 
     def __init__(self, node_name: str = "torque_node"):
@@ -119,8 +120,12 @@ class TorqueNode(JointStreamNode):
         self.live.restate()  # the config states the scheduling the node got: restate it
         self._publish_config(self.live.in_use, 0)
 
+    def hold_posture(self) -> np.ndarray | None:
+        return self._hold_posture
+
     def configure(self, params: Params) -> tuple[str, ...]:
         out = self.output_settings = OutputSettings.from_params(params)
+        self.missing_joints = params.value("missing_joints")
         self.output_rate_hz = out.output_rate_hz
         self.input_timeout_ns = round(out.input_timeout * 1e9)
         self._std_topic = None
@@ -146,6 +151,11 @@ class TorqueNode(JointStreamNode):
         def make(request: ModelRequest, config_id: int, n: int, previous: ModelBundle) -> ModelBundle:
             return build_bundle(request, config_id, n, previous, std=std)
 
+        self._hold_posture = None
+        self._held_stated: tuple[str, ...] = ()
+        if self.missing_joints == "hold":
+            self._hold_posture = np.array([params.value(f"hold_posture.{j}")
+                                           for j in bundle.arm.joint_names])
         self.live = LiveModel(bundle, make, self.config_message)
         # output_rate_hz > 0: whether the estimator holds a state to predict from, the input clock
         self._have_state = False
@@ -175,16 +185,23 @@ class TorqueNode(JointStreamNode):
             raise v.Rejection(v.NON_FINITE, str(exc)) from None
         self._velocity_given = velocity_given
         if self.output_rate_hz > 0:  # the timer publishes (est.predict keeps this estimate)
-            self._have_state = True
+            # only once the estimator is warm: a timer fed by one sample would repeat it
+            self._have_state = warm and est.stamp_ns is not None
             self._state_t_ns = t_ns
             self._last_in_ns = _time_ns()
             return None
+        if est.stamp_ns != t_ns:  # a delay: the estimate of an earlier sample, or none yet
+            if est.stamp_ns is None:  # the first delay_s of a stream: published later
+                return None
+            self.output_stamp_ns = est.stamp_ns
+        else:
+            self.output_stamp_ns = None
         # the state as estimated (a filtering estimator smooths q and qd too): the torque is
         # computed from it and the output message states it ("position and velocity as used")
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
         if ts is not None:  # computeRNEADerivatives gives τ too: no separate RNEA
-            known = ts.update(t_ns, velocity_given)
+            known = ts.update(est.stamp_ns, velocity_given)
             tau = ts.tau if known else pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
             self._std_ready = True
             self._std_known = known and warm
@@ -244,9 +261,10 @@ class TorqueNode(JointStreamNode):
                        "this node's clock (> input_timeout): not publishing")
             return False
         t_start = time.perf_counter_ns()
-        stamp = max(now, self._last_out_ns + 1)
         b = self.live.in_use
         est = b.estimator
+        # with a delay, the output is the (smoothed) estimate delay_s back, stamped so
+        stamp = max(now - round(getattr(est, "delay_s", 0.0) * 1e9), self._last_out_ns + 1)
         est.predict(stamp)  # from the last update's estimate, whatever was predicted before
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
@@ -333,7 +351,16 @@ class TorqueNode(JointStreamNode):
             realtime=(self.realtime_state.describe() if self.realtime_state is not None
                       else {"policy": "not applied yet"}),
             std=self._std_config(b),
+            input=self._input_config(),
         )
+
+    def _input_config(self) -> dict:
+        out = {"missing_joints": self.missing_joints,
+               "held_joints": list(getattr(self, "held_joints", ()))}
+        if self._hold_posture is not None:
+            out["hold_posture"] = dict(zip(self.live.in_use.arm.joint_names if hasattr(self, "live")
+                                           else (), self._hold_posture.tolist(), strict=False))
+        return out
 
     def _std_config(self, b: ModelBundle) -> dict:
         if self._std_topic is None:
@@ -356,6 +383,8 @@ class TorqueNode(JointStreamNode):
             "estimator": desc["method"],
             **{f"estimator.lag_{k}_s": f"{x:.6f}" for k, x in desc["lag_s"].items()},
             "estimator.noise_rad": "unknown" if desc["noise_rad"] is None else f"{desc['noise_rad']:.3g}",
+            "missing_joints": self.missing_joints,
+            "held_joints": ", ".join(self.held_joints) or "none",
             **{f"live_changes.{k}": str(n) for k, n in self.live.counts().items()},
         }
         if self.output_rate_hz > 0:
@@ -366,6 +395,13 @@ class TorqueNode(JointStreamNode):
         return extra
 
     def after_diagnostics(self) -> None:
+        if self.held_joints != self._held_stated:  # the input's joint set changed: restate
+            self._held_stated = self.held_joints
+            self.live.restate()
+            self._publish_config(self.live.in_use, 0)
+        self._after_diagnostics_base()
+
+    def _after_diagnostics_base(self) -> None:
         text = self.live.in_force_text  # the config in force, republished with the diagnostics
         if text:
             self.config_pub.publish(String(data=text))

@@ -76,13 +76,18 @@ class NameMatch:
 
     index: np.ndarray | None  # (nv,) intp, model joint i -> message slot index[i]
     rejection: Rejection | None
+    held: np.ndarray | None = None  # model joints absent from the message, held (hold mode)
 
 
 class NameMatcher:
     """Name list -> index map, cached per distinct list so the steady state costs one compare."""
 
-    def __init__(self, joint_names: Sequence[str], cache_size: int = 16):
+    def __init__(self, joint_names: Sequence[str], cache_size: int = 16, hold: bool = False):
+        """hold: a model joint absent from a message is held (missing_joints: hold; the
+        caller writes its posture), instead of the message being refused (reject)."""
         self.joint_names = tuple(joint_names)
+        self.hold = hold
+        self.held: np.ndarray | None = None  # the held joints of the last matched list
         self._cache: OrderedDict[tuple[str, ...], NameMatch] = OrderedDict()
         self._cache_size = cache_size
         self._last_names: list[str] | None = None
@@ -104,6 +109,7 @@ class NameMatcher:
         m = self._last
         if m.rejection is not None:
             raise m.rejection
+        self.held = m.held
         return m.index
 
     def _build(self, names: tuple[str, ...]) -> NameMatch:
@@ -118,13 +124,16 @@ class NameMatcher:
         if dups:
             return NameMatch(None, Rejection(DUPLICATE_NAME, f"names repeated: {sorted(set(dups))}"))
         missing = [n for n in self.joint_names if n not in slots]
-        if missing:
+        if missing and (not self.hold or len(missing) == len(self.joint_names)):
+            hint = ("" if self.hold else "; a sensor that measures only some joints: "
+                    "missing_joints:=hold holds the others at hold_posture.<joint>")
             return NameMatch(None, Rejection(
                 MISSING_JOINT, f"{len(missing)} model joint(s) missing: {missing[:5]}"
-                + (" ..." if len(missing) > 5 else "")
+                + (" ..." if len(missing) > 5 else "") + hint
             ))
-        index = np.array([slots[n] for n in self.joint_names], dtype=np.intp)
-        return NameMatch(index, None)
+        index = np.array([slots.get(n, 0) for n in self.joint_names], dtype=np.intp)
+        held = np.array([i for i, n in enumerate(self.joint_names) if n not in slots], dtype=np.intp)
+        return NameMatch(index, None, held if len(held) else None)
 
     def nonfinite_detail(self, field: str, values: np.ndarray) -> str:
         """Which joints hold NaN/inf (slow path, only for the warning text)."""

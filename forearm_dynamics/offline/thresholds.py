@@ -28,6 +28,8 @@ class Thresholds:
     model_rel_floor: float = 0.05
     model_min_coverage: float = 0.9
     tail_grace_s: float = 0.1
+    markerless_nrmse_max: float = 0.5
+    old_stamps_latency_s: float = 1.0
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> Thresholds:
