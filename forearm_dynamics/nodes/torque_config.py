@@ -88,13 +88,14 @@ LIVE = frozenset(s.name for s in MODEL_SPECS)
 
 #: Partial joint sets (a mocap lab's arm, a glove's fingers): read-only
 INPUT_SPECS = (
-    Spec("missing_joints", "reject", "a model joint absent from an input message: reject the "
-         "message (naming the joints), or hold the joint at hold_posture.<joint> with zero "
-         "velocity and acceleration (listed in ~/config and /diagnostics); one sensor per "
-         "node (two sensors with disjoint joint sets on one node are not merged)",
+    Spec("missing_joints", "reject", "What to do with a model joint absent from an input "
+         "message: reject the message (naming the joints), or hold the joint at "
+         "hold_posture.<joint> with zero velocity and acceleration (listed in ~/config and "
+         "/diagnostics). One sensor per node: two sensors with disjoint joint sets on one node "
+         "are not merged.",
          choices=("reject", "hold")),
-    *(Spec(f"hold_posture.{j}", 0.0, f"missing_joints: hold: the angle {j} is held at when the "
-           "input lacks it", "rad", -2 * np.pi, 2 * np.pi) for j in JOINT_NAMES),
+    *(Spec(f"hold_posture.{j}", 0.0, f"With missing_joints hold, the angle {j} is held at when "
+           "the input lacks it.", "rad", -2 * np.pi, 2 * np.pi) for j in JOINT_NAMES),
 )
 
 OUTPUT_SPECS = (
