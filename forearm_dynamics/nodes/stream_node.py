@@ -10,15 +10,8 @@ message but the bytes rclpy hands over and the bytes published. Shapes the parse
 vouch for go through rclpy's deserialiser and the same checks (`_ingest`). Subclasses only
 fill `effort` (and `velocity` when the input has none) in `compute()`.
 
-Why (py-spy and line_profiler on the node at 1 kHz): `convert_to_py` of every input was
-~13 % of the node's CPU and publish() converted the message back to C structs and CDR;
-every numpy call costs several times its warm cost in a process that sleeps between
-samples, so the path keeps them few; and the template's arrays must be aligned (views on
-a plain bytearray are not: numpy and eigenpy then take slow paths). The shape of the first
-sample and numpy's percentile (diagnostics) are warmed up at start-up. Measured by
-`make bench` (65-movement replay at 1 kHz; benchmarks/results_before.json -> results.json):
-torque_node latency p50/p99/max 0.367/0.863/31.6 -> 0.254/0.611/3.9 ms, callback p50/p99
-107/230 -> 89/213 us (of which publish() 51/112), CPU 20.8 -> 15.0 % of a core.
+Why, measured (py-spy, line_profiler, `make bench`): docs/architecture.md, "The stream
+nodes' hot path".
 
 Stamp rules (G = max_stamp_gap; with max_stamp_gap 0, the default, G adapts to the stream:
 max(0.1 s, 5 x the previous sample interval), so a 20 Hz (or 5 Hz) stream is not a gap at
