@@ -124,8 +124,9 @@ class Host:
         self.procs.append(p)
         return p
 
-    def loss(self, percent: float, direction: str = "input") -> None:
-        """Drop `percent` % of UDP packets at random (nftables numgen), input or output."""
+    def loss(self, percent: float, directions: tuple[str, ...] = ("input",)) -> None:
+        """Drop `percent` % of this host's UDP packets at random (nftables numgen), on
+        input and/or output; 0 removes the rules."""
         nft = ensure_nft()
         table = "fdloss"
         self.run([nft, "delete", "table", "inet", table])  # none yet: fails, fine
@@ -134,11 +135,15 @@ class Host:
         n = round(percent)
         if abs(n - percent) > 1e-9 or not 0 < n <= 100:
             raise ValueError(f"loss must be an integer percentage, got {percent}")
-        for cmd in (["add", "table", "inet", table],
-                    ["add", "chain", "inet", table, direction,
-                     "{", "type", "filter", "hook", direction, "priority", "0", ";", "}"],
-                    ["add", "rule", "inet", table, direction, "meta", "l4proto", "udp",
-                     "numgen", "random", "mod", "100", "<", str(n), "counter", "drop"]):
+        cmds = [["add", "table", "inet", table]]
+        for d in directions:
+            if d not in ("input", "output"):
+                raise ValueError(f"direction must be input or output, got {d!r}")
+            cmds += [["add", "chain", "inet", table, d,
+                      "{", "type", "filter", "hook", d, "priority", "0", ";", "}"],
+                     ["add", "rule", "inet", table, d, "meta", "l4proto", "udp",
+                      "numgen", "random", "mod", "100", "<", str(n), "counter", "drop"]]
+        for cmd in cmds:
             r = self.run([nft, *cmd])
             if r.returncode:
                 raise RuntimeError(f"nft {' '.join(cmd)}: {r.stderr.strip()}")
@@ -147,7 +152,7 @@ class Host:
         """Packets the loss rules dropped so far (0 without rules)."""
         nft = ensure_nft()
         out = self.run([nft, "list", "table", "inet", "fdloss"]).stdout
-        return sum(int(part.split()[1]) for part in out.split("counter packets ")[1:])
+        return sum(int(part.split()[0]) for part in out.split("counter packets ")[1:])
 
 
 class TwoHosts:

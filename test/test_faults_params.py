@@ -93,6 +93,8 @@ INVALID = [
     ("torque_node", ["max_stamp_gap:=-1.0"], "max_stamp_gap"),  # 0 = adaptive: valid
     ("torque_node", ["max_stamp_gap:=.inf"], "max_stamp_gap"),
     ("torque_node", ["deadline_ms:=-1.0"], "deadline_ms"),
+    ("torque_node", ["qos_reliability_input:=lossy"], "qos_reliability_input"),
+    ("torque_node", ["qos_reliability_output:=true"], "qos_reliability_output"),
     ("torque_node", ["realtime_priority:=100"], "realtime_priority"),
     ("torque_node", ["realtime_priority:=high"], "realtime_priority"),
     ("torque_node", ["lock_memory:=1"], "lock_memory"),
@@ -132,6 +134,8 @@ INVALID = [
     ("null_echo_node", ["diagnostics_period:=often"], "diagnostics_period"),
     ("null_echo_node", ["max_stamp_gap:=.nan"], "max_stamp_gap"),
     ("null_echo_node", ["deadline_ms:=.nan"], "deadline_ms"),
+    ("null_echo_node", ["qos_reliability_input:=5"], "qos_reliability_input"),
+    ("null_echo_node", ["qos_reliability_output:=BEST_EFFORT"], "qos_reliability_output"),
     ("null_echo_node", ["realtime_priority:=-1"], "realtime_priority"),
     ("null_echo_node", ["lock_memory:=yes_please"], "lock_memory"),
     ("null_echo_node", ["cpu_affinity:=[-1]"], "cpu_affinity"),

@@ -12,8 +12,14 @@ for those or 'name:pkg/msg/Type' for any other. The latched `torque_node/config`
 writers keep is recorded even when the recorder matches them late: discovery matches each
 topic on its own, so a publisher that saw the recorder on `joint_states` may send its
 first marker before the recorder's `movement` reader is matched (a CI run lost movement
-3's marker that way). Everything else: reliable, volatile, depth `qos_depth` (1000: a
-writer pause of ~0.5 s at 2 kHz does not drop).
+3's marker that way). Everything else: volatile, depth `qos_depth` (1000: a writer pause
+of ~0.5 s at 2 kHz does not drop), reliable, and adapted to what the publishers offer as
+`ros2 bag record` does: once a best-effort publisher of a topic is seen (polled every
+DISCOVERY_POLL_S) its subscription is made best effort (a reliable reader matches no
+best-effort writer: "offering incompatible QoS", nothing recorded). Subscribing only once
+publishers are seen (rosbag2's way) was tried: the later match lost the first answers of a
+restarted torque node (test_faults_process). The channel's QoS metadata states the
+recorder's default (reliable).
 
 Files: `output` (default forearm_YYYYmmdd_HHMMSS.mcap in the working directory) is
 never overwritten; a missing or unwritable directory is one error line and exit code 2 (USAGE).
@@ -36,7 +42,7 @@ from pathlib import Path
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -64,6 +70,8 @@ KNOWN_TYPES: dict[str, type] = {
     "diagnostics": DiagnosticArray,
     CONFIG_TOPIC: String,
 }
+
+DISCOVERY_POLL_S = 0.1  # s between looks at the QoS the stream topics' publishers offer
 
 SPECS = (
     Spec("topics", list(DEFAULT_TOPICS), "topics to record: 'name' (types known for the "
@@ -181,11 +189,18 @@ class BagRecorder(RealtimeNode, Node):
         try:
             self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
                                     compression=compression)
+            self._depth = depth
+            self._streams: list[tuple[TopicPlan, str, int]] = []  # reliable until adapted
+            self._muted: set[int] = set()  # channels whose reliable subscription is replaced
             for plan, topic in zip(plans, resolved, strict=True):
                 qos = latched_qos(LATCHED_DEPTH) if plan.latched else stream_qos(depth)
                 channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
-                self.create_subscription(plan.msg_class, topic, self._callback(channel), qos, raw=True)
+                cb = self._callback(channel, None if plan.latched else self._muted)
+                self.create_subscription(plan.msg_class, topic, cb, qos, raw=True)
+                if not plan.latched:
+                    self._streams.append((plan, topic, channel))
             self.create_timer(flush_period, self._flush_if_due)
+            self.create_timer(DISCOVERY_POLL_S, self._adapt_qos)
         except BagWriteError as exc:
             if self.writer is not None:
                 self.writer.abort()
@@ -202,12 +217,16 @@ class BagRecorder(RealtimeNode, Node):
             f"recording {', '.join(resolved)} to {path} (depth {depth}, {compression} chunks of "
             f"<= {chunk_size} B or {flush_period} s)")
 
-    def _callback(self, channel: int):
+    def _callback(self, channel: int, muted: set[int] | None = None):
+        """The raw callback writing to `channel`; it drops what it gets once `channel` is in
+        `muted` (a reliable subscription replaced by a best-effort one, see _adapt_qos)."""
         write, now = self.writer.write, time.time_ns
         mask, block, unblock = _STOP_SIGNALS, signal.SIG_BLOCK, signal.SIG_UNBLOCK
         sigmask = signal.pthread_sigmask
 
         def on_message(data: bytes) -> None:
+            if muted and channel in muted:
+                return
             # SIGINT/SIGTERM held while the message is added: a signal raises KeyboardInterrupt
             # in this thread at any bytecode, and inside mcap's add_message that left its
             # statistics counting a message no chunk holds (rosbags then read 5688 messages of
@@ -223,6 +242,28 @@ class BagRecorder(RealtimeNode, Node):
                 sigmask(unblock, mask)
 
         return on_message
+
+    def _adapt_qos(self) -> None:
+        """Adapt each stream subscription to what its publishers offer, as `ros2 bag record`
+        does: it starts reliable (matched from the first sample, as before); once a
+        best-effort publisher of the topic is seen it is made best effort (a reliable reader
+        matches no best-effort writer: "offering incompatible QoS", nothing recorded), and
+        it stays so (a best-effort reader takes reliable writers too). On a topic with
+        reliable and best-effort writers, what the reliable ones send while the new
+        subscription is being matched (one discovery round) is not recorded."""
+        for item in list(self._streams):
+            plan, topic, channel = item
+            infos = self.get_publishers_info_by_topic(topic)
+            if all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos):
+                continue
+            # Not destroyed: under the EventsExecutor a subscription with a pending QoS event
+            # ("incompatible") cannot be destroyed safely (InvalidHandle in the executor); it
+            # is muted (its callback drops what reliable writers still send it: no duplicates).
+            self._muted.add(channel)
+            self.create_subscription(plan.msg_class, topic, self._callback(channel),
+                                     stream_qos(self._depth, False), raw=True)
+            self._streams.remove(item)
+            self.get_logger().info(f"{topic}: subscribed best effort, as its publisher(s) offer")
 
     def _flush_if_due(self) -> None:
         signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)  # a chunk is written whole

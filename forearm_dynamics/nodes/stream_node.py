@@ -78,6 +78,10 @@ STREAM_SPECS = (
     Spec("qos_depth", 1000, "history depth of input and output; 1000 = 1 s at 1 kHz, rides out "
          "a ~0.3 s delivery stall without loss", "messages", 1, 100000),
     Spec("qos_reliable", True, "reliable (true) or best-effort (false) input and output"),
+    Spec("qos_reliability_input", "", "input reliability apart: '' = as qos_reliable",
+         choices=("", "reliable", "best_effort")),
+    Spec("qos_reliability_output", "", "output reliability apart: '' = as qos_reliable",
+         choices=("", "reliable", "best_effort")),
     Spec("executor", "events", "rclpy executor: events (EventsExecutor, fastest) or single",
          choices=EXECUTORS),
     Spec("diagnostics_period", 1.0, "time between /diagnostics messages; 0 = none", "s", 0.0, 3600.0),
@@ -103,6 +107,8 @@ class StreamSettings:
     output_topic: str
     qos_depth: int
     qos_reliable: bool
+    input_reliable: bool
+    output_reliable: bool
     executor: str
     diagnostics_period: float
     max_stamp_gap: float
@@ -114,12 +120,23 @@ class StreamSettings:
             output_topic=p.topic("output_topic"),
             qos_depth=p.value("qos_depth"),
             qos_reliable=p.value("qos_reliable"),
+            input_reliable=_reliable(p.value("qos_reliability_input"), p.value("qos_reliable")),
+            output_reliable=_reliable(p.value("qos_reliability_output"), p.value("qos_reliable")),
             executor=p.value("executor"),
             diagnostics_period=p.value("diagnostics_period"),
             max_stamp_gap=p.value("max_stamp_gap"),
         )
         p.distinct_topics(("input_topic", "output_topic"), RESERVED_TOPICS)
         return settings
+
+
+def _rel(inp: bool, out: bool) -> str:
+    word = {True: "reliable", False: "best effort"}
+    return word[inp] if inp == out else f"input {word[inp]}, output {word[out]}"
+
+
+def _reliable(choice: str, default: bool) -> bool:
+    return default if choice == "" else choice == "reliable"
 
 
 class JointStreamNode(RealtimeNode, Node):
@@ -165,10 +182,10 @@ class JointStreamNode(RealtimeNode, Node):
         self._after_output = self.after_output if overridden else None
 
         s = self.settings
-        qos = stream_qos(s.qos_depth, s.qos_reliable)
-        self.pub = self.create_publisher(JointState, s.output_topic, qos)
-        self.sub = self.create_subscription(JointState, s.input_topic, self._on_joint_state, qos,
-                                            raw=True)
+        self.pub = self.create_publisher(JointState, s.output_topic,
+                                         stream_qos(s.qos_depth, s.output_reliable))
+        self.sub = self.create_subscription(JointState, s.input_topic, self._on_joint_state,
+                                            stream_qos(s.qos_depth, s.input_reliable), raw=True)
         self.diag_pub = None
         if s.diagnostics_period > 0:
             self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -178,7 +195,7 @@ class JointStreamNode(RealtimeNode, Node):
         self._plan = self._shapes.find(OutputTemplate(self.joint_names, effort=False).payload())
         self.get_logger().info(
             f"{self.sub.topic_name} -> {self.pub.topic_name} "
-            f"(depth {s.qos_depth}, {'reliable' if s.qos_reliable else 'best effort'}, "
+            f"(depth {s.qos_depth}, {_rel(s.input_reliable, s.output_reliable)}, "
             f"{s.executor} executor)"
         )
 

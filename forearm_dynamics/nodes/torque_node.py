@@ -88,7 +88,7 @@ class TorqueNode(JointStreamNode):
         if self._std_topic is not None:  # joint_torques_std: published by the output hook
             s = self.settings
             self.std_pub = self.create_publisher(JointState, self._std_topic,
-                                                 stream_qos(s.qos_depth, s.qos_reliable))
+                                                 stream_qos(s.qos_depth, s.output_reliable))
             self._std_templates = StdTemplates(self.joint_names)
             self._std_unknown = np.full(len(self.joint_names), np.inf)
         self.config_pub = self.create_publisher(String, NODE_CONFIG_TOPIC, latched_qos())
