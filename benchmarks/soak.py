@@ -211,7 +211,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--no-record", action="store_true", help="run without bag_recorder")
     ap.add_argument("--keep-bag", type=Path, metavar="MCAP", help="keep the recorded bag here")
     ap.add_argument("--start-delay", type=float, default=5.0,
-                    help="trajectory_publisher start_delay (s; see config/trajectory_publisher.yaml)")
+                    help="trajectory_publisher start_delay (s; see config/nodes/trajectory_publisher.yaml)")
     ap.add_argument("--rss-growth-mb", type=float, default=5.0)
     ap.add_argument("--p99-tolerance", type=float, default=0.25)
     ap.add_argument("--p99-floor-ms", type=float, default=0.1)

@@ -335,7 +335,7 @@ def test_burst_of_10000_good_messages(h, procs, tmp_path) -> None:
 
 def test_5khz_input_for_10s(procs, tmp_path) -> None:
     """50 000 samples at 5 kHz: every one answered, exact torques. The node runs with
-    qos_depth 5000 = 1 s of input, the sizing rule of config/torque_node.yaml at 5 kHz.
+    qos_depth 5000 = 1 s of input, the sizing rule of config/nodes/torque_node.yaml at 5 kHz.
     The feeder sends bursts of 2 500 (0.5 s at 5 kHz, half the queue) and waits for the
     last answer of each before the next: on a machine too busy to sustain 5 kHz the test
     takes longer instead of overflowing the queue (how fast the node is: make bench)."""

@@ -31,7 +31,7 @@ SPECS = {"torque_node": TorqueNode.specs, "trajectory_publisher": trajectory_pub
 
 
 def test_every_node_yaml_lists_its_parameters() -> None:
-    """config/<node>.yaml names every parameter (its default), nothing else; only the
+    """config/nodes/<node>.yaml names every parameter (its default), nothing else; only the
     estimator's method and settings may be left to the estimation package."""
     for node, specs in SPECS.items():
         keys = set(load_defaults(node))

@@ -11,7 +11,7 @@ viz/colors.py) and, latched, `robot_description` (the URDF of the model drawn).
 
 The model is the torque node's, read from its config message and followed through every
 live change (body size, side, payload ...); until one arrives, or with config_topic '',
-this node's own model parameters (the torque node's definitions, config/arm_viz.yaml).
+this node's own model parameters (the torque node's definitions, config/nodes/arm_viz.yaml).
 A separate process, so the 1 kHz torque path is untouched: the joint_torques subscription
 only keeps the newest message's bytes (no decoding at 1 kHz); the timer decodes one, runs
 forward kinematics and publishes CDR bytes made by viz/marker_cdr.py.

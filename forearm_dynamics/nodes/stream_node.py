@@ -58,7 +58,7 @@ _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
 #: the transport): a one-off ~0.3 s reliable-delivery stall happens in some runs (about 3 s
 #: after a new publisher joins); a short queue then drops samples (depth 100: ~230, depth
 #: 10: 318 in make bench), 1000 none. Reliable, depth 1000 and the EventsExecutor were
-#: chosen by measurement: make bench, section choices; see config/torque_node.yaml.
+#: chosen by measurement: make bench, section choices; see config/nodes/torque_node.yaml.
 
 #: The node's own config topic, relative to the node (two instances never collide).
 NODE_CONFIG_TOPIC = "~/config"

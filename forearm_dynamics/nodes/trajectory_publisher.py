@@ -10,7 +10,7 @@ one), so a late tick is caught up (at most MAX_BURST samples) instead of losing 
 At each movement start a JSON marker goes out on `movement` (reliable, transient local,
 depth 100): id, name, elbow, body_size, t0 (s) and t0_ns of its first sample. Without
 `loop`, the node waits until subscribers acknowledged everything (up to `drain` s) and
-exits 0. Parameters: config/trajectory_publisher.yaml; an invalid one -> exit code 2.
+exits 0. Parameters: config/nodes/trajectory_publisher.yaml; an invalid one -> exit code 2.
 
 Sensor-like input (noise_deg, publish_velocity, jitter_ms, drop_fraction, seed): with the
 defaults the stream is exact as above. Otherwise, per due sample and in this order from
