@@ -10,7 +10,7 @@ always one line meant for a user: it names the file, topic, key or parameter at 
     │   │                                parameter value out of range or not fitting the
     │   │                                input (start_offset past the end of the bag, an
     │   │                                unknown estimator, a negative tolerance)
-    │   └── (nodes.params.ParameterError: a node parameter refused, with its name)
+    │   └── (nodes.spec.ParameterError: a node parameter refused, with its name)
     ├── DataError                        exit DATA: the data are wrong or lost
     ├── ConfigMessageError (ValueError)  a `<node>/config` message that cannot be read back
     │                                    into the model it states (model_config.py)
