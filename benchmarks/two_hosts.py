@@ -84,7 +84,7 @@ def _bag_figures(bag: Path) -> dict:
 
 
 def run_case(name: str, loss: int, directions: str, profile: bool, best_effort: bool,
-             movements: int, domain: int, work: Path) -> dict:
+             movements: int, domain: int, work: Path, extra_node_args: list[str] | None = None) -> dict:
     logs = work / name
     logs.mkdir(parents=True)
     bag = logs / "b.mcap"
@@ -92,7 +92,9 @@ def run_case(name: str, loss: int, directions: str, profile: bool, best_effort: 
     load0 = loadavg()
     with hostkit.TwoHosts() as h:
         h.a.loss(loss, ("input", "output") if directions == "both" else ("input",))
-        node_args = ["--ros-args", "-p", "qos_reliability_input:=best_effort"] if best_effort else []
+        node_args = (["-p", "qos_reliability_input:=best_effort"] if best_effort else []) \
+            + list(extra_node_args or [])
+        node_args = ["--ros-args", *node_args] if node_args else []
         node = h.a.start([str(BIN / "torque_node"), *node_args], env, logs / "a_node.log")
         rec = h.b.start([str(BIN / "bag_recorder"), "--ros-args", "-p", f"output:={bag}"], env,
                         logs / "b_rec.log")
@@ -138,6 +140,8 @@ def main() -> int:
     ap.add_argument("--movements", type=int, default=10)
     ap.add_argument("--cases", default=",".join(c[0] for c in CASES))
     ap.add_argument("--out", type=Path, default=HERE / "two_hosts.json")
+    ap.add_argument("--node-args", default="", help="extra torque_node -p name:=value, comma-separated "
+                    "(e.g. realtime_priority:=50)")
     args = ap.parse_args()
     why = hostkit.can_make_hosts()
     if why:
@@ -152,7 +156,10 @@ def main() -> int:
     for name, loss, directions, profile, best_effort in CASES:
         if name not in wanted:
             continue
-        r = run_case(name, loss, directions, profile, best_effort, args.movements, lease.domain, work)
+        extra = [x for a in filter(None, args.node_args.split(",")) for x in ("-p", a)]
+        r = run_case(name, loss, directions, profile, best_effort, args.movements, lease.domain, work,
+                     extra)
+        r["node_args"] = extra
         lat = r.get("latency_ms", {})
         print(f"{name:22s} lost {r['lost']} of {r['sent']} ({r.get('missing_before_first_answer')} "
               f"before the first answer), latency p50/p99/max "
