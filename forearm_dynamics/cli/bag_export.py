@@ -6,7 +6,9 @@
 One row per joint_torques message, in stamp order. Columns: `time` (s; for a bag made by
 mot_to_bag the source file's own time, else from the first stamp), `stamp_ns` (CSV only),
 `<joint>_moment` (N·m) per joint, and with --states `<joint>` (rad) and `<joint>_speed`
-(rad/s): the state the torques were computed for. `.sto` is what OpenSim's Inverse
+(rad/s): the state the torques were computed for; when the bag has `<topic>_std` (the
+torque σ: torque_node publish_std, bag_torques), `<joint>_moment_std` (N·m, 1σ; inf while
+the estimate warms up, NaN where no σ of that stamp) unless --no-std. `.sto` is what OpenSim's Inverse
 Dynamics tool writes (header, `inDegrees=no`, `endheader`, tab-separated), readable by
 OpenSim's tools; `--names opensim` labels columns with the MoBL-ARMS/ARMS coordinate names
 of config/opensim_coordinates.yaml (moments and states in the OpenSim coordinate's sign).
@@ -44,6 +46,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--names", choices=("ours", "opensim"), default="ours")
     ap.add_argument("--map", type=Path, default=None, metavar="YAML")
     ap.add_argument("--overwrite", action="store_true")
+    ap.add_argument("--no-std", dest="std", action="store_false",
+                    help="leave out the <joint>_moment_std columns (added when the bag has <topic>_std)")
     return ap.parse_args(argv)
 
 
@@ -55,6 +59,20 @@ def _source_start(bag) -> int | None:
             except (ValueError, TypeError):
                 return None
     return None
+
+
+def _std_columns(bag, topic: str, stamps: np.ndarray) -> np.ndarray:
+    """(N, J) σ (N·m, never negative: no sign change) of each torque row, matched by stamp;
+    NaN where the σ topic has no message of that stamp, inf where it says warming up."""
+    sd = read_joint_series(bag, topic, JOINT_NAMES, effort=True)
+    out = np.full((len(stamps), len(JOINT_NAMES)), np.nan)
+    order = np.argsort(sd.stamp_ns, kind="stable")
+    s_st = sd.stamp_ns[order]
+    if len(s_st):
+        pos = np.minimum(np.searchsorted(s_st, stamps), len(s_st) - 1)
+        hit = s_st[pos] == stamps
+        out[hit] = sd.effort[order][pos[hit]]
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
     if args.states:
         labels += names + [f"{n}_speed" for n in names]
         cols += [s.position[order] * signs, s.velocity[order] * signs]
+    std_topic = s.topic.rstrip("/") + "_std"
+    if args.std and bag.info.find_topic(std_topic) is not None:
+        labels += [f"{n}_moment_std" for n in names]
+        cols.append(_std_columns(bag, std_topic, stamps))
     data = np.hstack(cols)
     if args.format == "csv":
         write_table(out, "", labels, t, data, sep=",", opensim=False, stamps_ns=stamps)

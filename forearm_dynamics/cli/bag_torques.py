@@ -21,6 +21,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from ..builders import MODEL_KINDS
 from ..dynamics import build_model
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
@@ -72,6 +74,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--input-topic", default="joint_states")
     ap.add_argument("--topic", default="joint_torques", help="output topic")
     ap.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    ap.add_argument("--no-std", dest="std", action="store_false",
+                    help="do not write <topic>_std (1σ per torque; written by default for estimators "
+                         "with a covariance: kalman)")
     return ap.parse_args(argv)
 
 
@@ -108,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     res, counts = bag_torques(args.input, args.output, arm, estimator=args.estimator,
                               settings=settings, input_topic=args.input_topic, output_topic=args.topic,
                               max_gap_s=args.max_stamp_gap, cutoff_hz=args.cutoff,
-                              overwrite=args.overwrite)
+                              overwrite=args.overwrite, std=args.std)
     for w in res.warnings:
         print(f"{PROG}: warning: {w}", file=sys.stderr)
     n = len(res.stamps_ns)
@@ -119,6 +124,11 @@ def run(args: argparse.Namespace) -> int:
           f"estimator {args.estimator}: "
           f"computed in {res.compute_s:.3f} s ({rate:,.0f} samples/s); wrote "
           f"{sum(counts.values())} messages to {args.output}")
+    if res.std is not None:
+        warming = int(np.isinf(res.std).any(axis=1).sum())
+        print(f"{PROG}: {args.topic.rstrip('/')}_std: 1σ per torque ({warming} samples warming up: inf)")
+    elif args.std:
+        print(f"{PROG}: no {args.topic.rstrip('/')}_std: {res.std_config['why']}")
     return OK
 
 

@@ -2,6 +2,7 @@
 
     check_bag BAG [--json OUT] [--html REPORT.html] [--thresholds config/check.yaml]
                   [--reference FILE] [--max-latency-p99-ms MS]
+                  [--std-coverage LO,HI] [--std-ratio LO,HI]
     check_bag BAG --recover OUT
 
 Exit codes (forearm_dynamics.exit_codes) mean correctness, not speed:
@@ -37,6 +38,9 @@ The --json report (NRMSE values are fractions there: 0.01 = 1 %; times in ms or 
                (joint_states of the last tail_grace_s, not judged), tail_answered,
                unmatched_torques, latency_ms {p50, p99, max}, latency_p99_ms_target,
                latency_p99_ms_max (null = not gating), rate_hz, max_gap_ms {topic: value}
+  std_calibration  null without joint_torques_std, else {groups {group: {coverage, ratio,
+               rmse_nm, rms_std_nm, n}}, samples, warming_up, unmatched, model_part,
+               coverage_range, ratio_range} (offline/calibration.py)
   machine      cpus, load_average_now [1, 5, 15 min], load_average_during_run [1 min
                values from the torque node's /diagnostics]
   thresholds   the thresholds used (config/check.yaml keys)
@@ -60,6 +64,7 @@ from ..errors import BagNoData, ForeignBag
 from ..exit_codes import DATA, OK
 from ..model_config import model_from_config
 from ..movements import get_movement, movement_library
+from ..offline.calibration import gate, score_calibration
 from ..offline.check import CheckReport, MovementResult, analyse
 from ..offline.recording import read_config, read_recording
 from ..offline.thresholds import Thresholds
@@ -87,11 +92,27 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--max-latency-p99-ms", type=float, metavar="MS", default=None,
                     help="exit 1 if the one-way latency p99 exceeds MS (default: report only, "
                          "or latency_p99_ms_max from the thresholds file)")
+    ap.add_argument("--std-coverage", type=_range, metavar="LO,HI", default=None,
+                    help="fail if any DOF group's coverage of ±1.96σ (joint_torques_std vs the "
+                         "exact-state truth) is outside [LO, HI], e.g. 0.90,0.98; default: reported only")
+    ap.add_argument("--std-ratio", type=_range, metavar="LO,HI", default=None,
+                    help="fail if any DOF group's RMS(σ)/RMSE is outside [LO, HI], e.g. 0.8,1.5; "
+                         "default: reported only")
     ap.add_argument("--baseline", type=Path, metavar="OLD",
                     help="regression: compare joint_torques with OLD's, stamp by stamp")
     ap.add_argument("--tolerance", type=float, default=1e-6, metavar="NM",
                     help="with --baseline: largest allowed |difference| (N·m, default 1e-6)")
     return ap.parse_args(argv)
+
+
+def _range(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give LO,HI (two numbers)") from None
+    if not lo <= hi:
+        raise argparse.ArgumentTypeError(f"{text!r}: LO must not exceed HI")
+    return lo, hi
 
 
 def _known_movement(movement_id: int) -> bool:
@@ -200,7 +221,8 @@ def latency_lines(report: CheckReport, th: Thresholds) -> list[str]:
 PER_MOVEMENT_NOTE = 0.10
 
 
-def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, out=None) -> None:
+def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, out=None,
+                 extra: list[str] | tuple[str, ...] = ()) -> None:
     """The human report: every number with its unit; notes only where there is one."""
     out = out or sys.stdout
     th = th or Thresholds()
@@ -251,6 +273,8 @@ def print_report(report: CheckReport, bag_info, th: Thresholds | None = None, ou
               f"{d.tail_grace_s:g} s of the stream (tail_grace_s): their answers may come after the "
               f"recorder stops ({_n(d.tail_answered)} of them were answered in the bag)")
     for line in latency_lines(report, th):
+        p(line)
+    for line in extra:  # e.g. the σ calibration lines
         p(line)
     for f in report.failures:
         p(f"FAIL: {f}")
@@ -348,14 +372,21 @@ def run(args: argparse.Namespace) -> int:
                             f"{info.message_count} messages of its complete chunks")
     ref, ref_problem = _reference(args.reference)
     report = analyse(rec, choice, ref, th, ref_problem)
+    cal = score_calibration(rec, choice.arm, config)
+    report.failures += gate(cal, args.std_coverage, args.std_ratio)
     code = DATA if report.failures else OK
     try:
-        print_report(report, info, th)
+        print_report(report, info, th, extra=() if cal is None else cal.lines())
         sys.stdout.flush()
     except BrokenPipeError:  # `check_bag BAG | head`: the reader left; keep the exit code
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     if args.json is not None:
-        args.json.write_text(json.dumps(to_json(report, info, th, code), indent=1), encoding="utf-8")
+        doc = to_json(report, info, th, code)
+        doc["std_calibration"] = None if cal is None else _clean(
+            {"groups": cal.groups, "samples": cal.samples, "warming_up": cal.warming_up,
+             "unmatched": cal.unmatched, "model_part": cal.model_part,
+             "coverage_range": args.std_coverage, "ratio_range": args.std_ratio})
+        args.json.write_text(json.dumps(doc, indent=1), encoding="utf-8")
     if args.html is not None:
         from ..offline.html_report import render, write_html
 

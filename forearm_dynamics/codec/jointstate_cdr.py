@@ -248,3 +248,34 @@ class OutputTemplate:
 
     def payload(self) -> bytes:
         return self.buf.tobytes()
+
+
+class StdTemplate:
+    """CDR bytes of a JointState with names and effort only (joint_torques_std: position and
+    velocity empty, effort = 1σ per torque); `fill(sec, nsec, std)` writes stamp and effort
+    and returns the payload."""
+
+    def __init__(self, joint_names, frame_id: str = ""):
+        n = len(joint_names)
+        msg = message("JointState")()
+        msg.header.frame_id = frame_id
+        msg.name = list(joint_names)
+        msg.effort = [float(i + 1) for i in range(n)]
+        raw = serialize(msg)
+        lay = verified_layout(raw)
+        if lay.names != tuple(joint_names) or lay.n_pos or lay.n_vel or lay.n_eff != n:
+            raise NotMine("std template does not hold the joint names")
+        self.buf = aligned_buffer(lay.size)
+        memoryview(self.buf)[:] = lay.zero_padding(raw)
+        self.effort = lay.array(self.buf, "effort")
+        self.effort.fill(0.0)
+        self._pack = STAMP.pack_into
+        # rclpy's serialiser leaves spare bytes after the empty position/velocity sequences;
+        # strict readers (rosbags) check the size: the payload ends where the message does
+        end = (lay.meaningful.bit_length() + 7) // 8
+        self._end = end + (-end % 4)
+
+    def fill(self, sec: int, nsec: int, std) -> bytes:
+        self._pack(self.buf, 4, sec, nsec)
+        np.copyto(self.effort, std)
+        return self.buf[:self._end].tobytes()

@@ -1,46 +1,15 @@
-"""joint_torques_std: the σ of every joint_torques message, as raw JointState CDR bytes.
-
-Same header (stamp, frame_id) and names as the joint_torques message it belongs to;
-position and velocity empty, effort = one standard deviation (N·m) of each torque
-(forearm_dynamics/uncertainty, docs/uncertainty.md). Built like the torque output
-(jointstate_cdr): the bytes are serialised once per frame_id by rclpy, the layout verified,
-and per sample only the stamp and the effort view are written.
+"""joint_torques_std's templates per frame_id: the σ of every joint_torques message, as raw
+JointState CDR bytes with the same header (stamp, frame_id) and names; position and velocity
+empty, effort = one standard deviation (N·m) of each torque (forearm_dynamics/uncertainty,
+docs/uncertainty.md). Serialised once per frame_id by rclpy (jointstate_cdr.StdTemplate);
+per sample only the stamp and the effort are written.
 """
 
 from __future__ import annotations
 
-import numpy as np
-from rclpy.serialization import serialize_message
-from sensor_msgs.msg import JointState
-
-from ..codec.jointstate_cdr import STAMP, NotMine, aligned_buffer, verified_layout
+from ..codec.jointstate_cdr import StdTemplate
 
 CACHE = 8  # templates, one per frame_id (as the torque output's)
-
-
-class StdTemplate:
-    """CDR bytes of a JointState with names and effort only; `effort` a writable view."""
-
-    def __init__(self, joint_names, frame_id: str = ""):
-        n = len(joint_names)
-        msg = JointState()
-        msg.header.frame_id = frame_id
-        msg.name = list(joint_names)
-        msg.effort = [float(i + 1) for i in range(n)]
-        raw = serialize_message(msg)
-        lay = verified_layout(raw)
-        if lay.names != tuple(joint_names) or lay.n_pos or lay.n_vel or lay.n_eff != n:
-            raise NotMine("std template does not hold the joint names")
-        self.buf = aligned_buffer(lay.size)
-        memoryview(self.buf)[:] = lay.zero_padding(raw)
-        self.effort = lay.array(self.buf, "effort")
-        self.effort.fill(0.0)
-        self._pack = STAMP.pack_into
-
-    def fill(self, sec: int, nsec: int, std: np.ndarray) -> bytes:
-        self._pack(self.buf, 4, sec, nsec)
-        np.copyto(self.effort, std)
-        return self.buf.tobytes()
 
 
 class StdTemplates:

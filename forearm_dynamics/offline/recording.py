@@ -16,6 +16,7 @@ from ..codec.ros import deserialize
 
 JOINT_STATES = "joint_states"
 JOINT_TORQUES = "joint_torques"
+JOINT_TORQUES_STD = "joint_torques_std"
 MOVEMENT = "movement"
 CONFIG = "torque_node/config"
 DIAGNOSTICS = "/diagnostics"
@@ -42,6 +43,7 @@ class Recording:
     markers: list[Marker]
     warnings: list[str] = field(default_factory=list)
     load_average: list[float] = field(default_factory=list)  # from /diagnostics, if recorded
+    joint_torques_std: JointSeries | None = None  # effort = 1σ of each torque, if recorded
 
 
 def _marker(text: str) -> Marker:
@@ -75,7 +77,8 @@ def read_config(bag: Bag) -> tuple[dict | None, list[str]]:
 def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
     """Read joint_states (stamps, position, velocity), joint_torques (stamps, effort), markers."""
     info = bag.info
-    chans = {key: info.find_topic(key) for key in (JOINT_STATES, JOINT_TORQUES, MOVEMENT)}
+    chans = {key: info.find_topic(key) for key in (JOINT_STATES, JOINT_TORQUES, MOVEMENT,
+                                                    JOINT_TORQUES_STD)}
     diag = next((c for c in info.channels.values() if c.topic == DIAGNOSTICS), None)
     if diag is not None:
         chans[DIAGNOSTICS] = diag
@@ -84,12 +87,15 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
     where = f"{bag.path}: "
     states = JointStateReader(joint_names, False, where + JOINT_STATES)
     torques = JointStateReader(joint_names, True, where + JOINT_TORQUES)
+    stds = JointStateReader(joint_names, True, where + JOINT_TORQUES_STD)
     markers: list[Marker] = []
     warnings: list[str] = []
     for ch, msg in bag.messages([c.topic for c in chans.values() if c is not None]):
         key = ids.get(ch.id)
         if key == JOINT_TORQUES:
             torques.add(msg.data, msg.log_time)
+        elif key == JOINT_TORQUES_STD:
+            stds.add(msg.data, msg.log_time)
         elif key == JOINT_STATES:
             states.add(msg.data, msg.log_time)
         elif key == MOVEMENT:
@@ -111,6 +117,7 @@ def read_recording(bag: Bag, joint_names: tuple[str, ...]) -> Recording:
         markers=sorted(unique.values(), key=lambda m: m.t0_ns),
         warnings=warnings,
         load_average=load,
+        joint_torques_std=stds.series(JOINT_TORQUES_STD) if chans[JOINT_TORQUES_STD] is not None else None,
     )
 
 

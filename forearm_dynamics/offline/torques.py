@@ -11,8 +11,11 @@ low-pass, derivatives of the filtered positions). Torques: ArmModel.inverse_dyna
 
 The output bag holds every message of the input (same channels, QoS, log times) plus
 `joint_torques` (JointState in the model's joint order: position, velocity as used, effort;
-header copied from the input; log time = the input's) and a `torque_node/config` JSON like
-the node's, naming model, body size and estimator, so check_bag can rebuild the model.
+header copied from the input; log time = the input's), `joint_torques_std` beside it (same
+header and names, effort = 1σ per torque, inf while warming up: the node's publish_std, for
+estimators with a covariance; bag_torques --no-std leaves it out) and a `torque_node/config`
+JSON like the node's, naming model, body size, estimator and what the σ contains, so
+check_bag can rebuild the model and score the σ.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from ..bag.recover import copy_layout, custom_data
 from ..bag.rosbag2_meta import TopicQos
 from ..bag.writer import BagWriter
 from ..codec.jointstate import JointSeries, read_joint_series
-from ..codec.jointstate_cdr import OutputTemplate
+from ..codec.jointstate_cdr import OutputTemplate, StdTemplate
 from ..codec.ros import message, serialize
 from ..dynamics import ArmModel
 from ..errors import ForeignBag, OutputExists, UsageError
@@ -39,6 +42,7 @@ from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, segments, zero_phase
 from ..filtering import analysis_config
+from ..uncertainty import NoCovariance, TorqueStd
 from ..version import package_version
 
 #: The node's estimators, then the offline zero-phase one.
@@ -58,6 +62,8 @@ class OfflineResult:
     segments: int = 1
     warnings: list[str] = field(default_factory=list)
     compute_s: float = 0.0
+    std: np.ndarray | None = None  # (N, n) 1σ per torque (inf while warming up), as the node's
+    std_config: dict = field(default_factory=lambda: {"published": False, "why": "not asked for"})
 
 
 def stamp_rules(stamps_ns: np.ndarray, max_gap_ns: int) -> np.ndarray:
@@ -81,8 +87,12 @@ def stamp_rules(stamps_ns: np.ndarray, max_gap_ns: int) -> np.ndarray:
 
 def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMATOR,
             settings: dict | None = None, max_gap_s: float = 0.1,
-            cutoff_hz: float | None = None) -> OfflineResult:
-    """Torques of every kept sample; BagError when a joint of the model is never given."""
+            cutoff_hz: float | None = None, std: bool = True) -> OfflineResult:
+    """Torques of every kept sample; BagError when a joint of the model is never given.
+
+    std: also the σ of every torque (uncertainty.TorqueStd, the node's publish_std: same
+    numbers, inf while the estimate warms up) when the estimator carries a covariance;
+    `std_config` says what it contains or why there is none."""
     if estimator not in ESTIMATORS:
         raise UsageError(f"estimator must be one of {', '.join(ESTIMATORS)}, got {estimator!r}")
     missing = [n for j, n in enumerate(arm.joint_names) if not np.isfinite(stream.position[:, j]).any()]
@@ -102,24 +112,46 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
     t, q = stream.stamp_ns[idx], stream.position[idx]
     has_v = stream.has_velocity[idx]
     start = time.perf_counter()
+    std_out, std_config = None, {"published": False, "why": "not asked for (--no-std)"}
+    if std and estimator in ("zero_phase", "backward"):
+        std_config = {"published": False, "why": f"estimator {estimator!r} carries no covariance: "
+                      "no torque σ (use estimator kalman)"}
     if estimator == "zero_phase":
         q, qd, qdd = zero_phase(t, q, cutoff_hz, gap)
     elif estimator == "backward" and (has_v.all() or not has_v.any()):
         qd, qdd, _warm = backward_batch(t, q, stream.velocity[idx] if has_v.all() else None, settings, gap)
     else:  # the estimator sample by sample, as the node: q and qd as it estimates them
         est = make_estimator(estimator, arm.nv, settings or {})
+        ts = None
+        if std:
+            try:
+                ts = TorqueStd(arm, est)
+            except NoCovariance as exc:
+                std_config = {"published": False, "why": str(exc)}
+            else:
+                std_config = {"published": True, **ts.parts()}
         q, qd, qdd = q.copy(), np.zeros_like(q), np.zeros_like(q)
+        tau_ts = np.empty_like(q) if ts is not None else None
+        std_out = np.full_like(q, np.inf) if ts is not None else None
         last = None
         for k in range(len(t)):
             if last is not None and not 0 < t[k] - last <= gap:
                 est.reset()
+                if ts is not None:
+                    ts.reset()
             last = t[k]
-            est.update(int(t[k]), q[k], stream.velocity[idx[k]] if has_v[k] else None)
+            vel = bool(has_v[k])
+            warm = est.update(int(t[k]), q[k], stream.velocity[idx[k]] if vel else None)
             q[k], qd[k], qdd[k] = est.q, est.qd, est.qdd
-    tau = arm.inverse_dynamics_batch(q, qd, qdd)
+            if ts is not None:
+                known = ts.update(int(t[k]), vel)
+                tau_ts[k] = ts.tau if known else arm.inverse_dynamics(est.q, est.qd, est.qdd)
+                if known and warm:
+                    std_out[k] = ts.std
+    tau = arm.inverse_dynamics_batch(q, qd, qdd) if std_out is None else tau_ts
     elapsed = time.perf_counter() - start
     return OfflineResult(t, stream.log_ns[idx], [stream.frame_ids[i] for i in idx], q, qd, qdd, tau,
-                         dropped, len(segments(t, gap)), warnings, elapsed)
+                         dropped, len(segments(t, gap)), warnings, elapsed, std_out, std_config)
 
 
 def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Path,
@@ -144,10 +176,13 @@ def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Pa
 def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: dict,
               output_topic: str = "joint_torques", config_topic: str = "torque_node/config",
               overwrite: bool = False) -> dict[str, int]:
-    """Every message of src plus output_topic and config_topic; returns counts per topic."""
+    """Every message of src plus output_topic, its σ (output_topic + "_std", when res.std is
+    not None) and config_topic; returns counts per topic."""
     bag = open_bag(src)
     info = bag.info
-    for topic in (output_topic, config_topic):
+    std_topic = output_topic.rstrip("/") + "_std"
+    topics = (output_topic, config_topic) + ((std_topic,) if res.std is not None else ())
+    for topic in topics:
         if (ch := info.find_topic(topic)) is not None:
             raise OutputExists(f"{src} already has {ch.topic}; choose another with --topic "
                            f"(e.g. {output_topic}_offline)")
@@ -158,9 +193,14 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
                                TopicQos(depth=1000))
         cfg = writer.add_topic("/" + config_topic.strip("/"), "std_msgs/msg/String",
                                TopicQos(depth=1, durability="transient_local"))
+        std_ch = None
+        if res.std is not None:
+            std_ch = writer.add_topic("/" + std_topic.strip("/"), "sensor_msgs/msg/JointState",
+                                      TopicQos(depth=1000))
         first_log = int(res.log_ns.min()) if len(res.log_ns) else info.start_ns
         writer.write(cfg, serialize(message("String")(data=json.dumps(config))), first_log)
         templates: dict[str, OutputTemplate] = {}
+        std_templates: dict[str, StdTemplate] = {}
 
         def emit(k: int) -> None:
             tpl = templates.get(res.frame_ids[k])
@@ -169,8 +209,14 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
             tpl.q[:] = res.q[k]
             tpl.qd[:] = res.qd[k]
             tpl.effort[:] = res.tau[k]
-            tpl.pack_stamp(*divmod(int(res.stamps_ns[k]), 1_000_000_000))
+            sec_nsec = divmod(int(res.stamps_ns[k]), 1_000_000_000)
+            tpl.pack_stamp(*sec_nsec)
             writer.write(out, tpl.payload(), int(res.log_ns[k]))
+            if std_ch is not None:
+                st = std_templates.get(res.frame_ids[k])
+                if st is None:
+                    st = std_templates[res.frame_ids[k]] = StdTemplate(arm.joint_names, res.frame_ids[k])
+                writer.write(std_ch, st.fill(*sec_nsec, res.std[k]), int(res.log_ns[k]))
 
         k, n = 0, len(res.stamps_ns)
         # interleave: each output right after its input (both carry the input's log time)
@@ -196,13 +242,14 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
 def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT_ESTIMATOR,
                 settings: dict | None = None, input_topic: str = "joint_states",
                 output_topic: str = "joint_torques", max_gap_s: float = 0.1,
-                cutoff_hz: float | None = None, overwrite: bool = False) -> tuple[OfflineResult, dict]:
+                cutoff_hz: float | None = None, overwrite: bool = False,
+                std: bool = True) -> tuple[OfflineResult, dict]:
     src, dst = Path(src), Path(dst)
     if dst.exists() and src.resolve() == dst.resolve():
         raise OutputExists(f"{dst}: the output must be another file than the input")
     bag = open_bag(src)
     stream = read_joint_series(bag, input_topic, arm.joint_names)
-    res = compute(stream, arm, estimator, settings, max_gap_s, cutoff_hz)
+    res = compute(stream, arm, estimator, settings, max_gap_s, cutoff_hz, std)
     if not bag.info.complete:
         res.warnings.insert(0, f"{src} is truncated ({bag.info.problem}); using the "
                             f"{bag.info.message_count} messages of its complete chunks")
@@ -217,5 +264,8 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT
     velocity_given = bool(len(stream.has_velocity)) and bool(stream.has_velocity.all())
     config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s,
                             cutoff_hz, dt_s, velocity_given)
+    config["std"] = dict(res.std_config)
+    if res.std is not None:
+        config["std"]["topic"] = output_topic.rstrip("/") + "_std"
     counts = write_bag(src, dst, res, arm, config, output_topic, cfg_topic, overwrite)
     return res, counts

@@ -37,10 +37,13 @@ class TorquesWithStd:
 def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
                               settings: dict | None = None, lag: bool = True, model: bool = True,
                               covariance: str = "noise", gain: float | None = None,
-                              tau_s: float | None = None, t_in_ns: bool = False) -> TorquesWithStd:
+                              tau_s: float | None = None, t_in_ns: bool = False,
+                              max_gap_s: float = 0.1) -> TorquesWithStd:
     """τ and σ for samples at t (s, increasing; ns with t_in_ns) of positions q (N, n) in
-    arm.joint_names order, velocities qd (N, n) or None. ValueError for an estimator without
-    a covariance (NoCovariance), bad shapes or non-increasing stamps."""
+    arm.joint_names order, velocities qd (N, n) or None. A stamp step over max_gap_s resets
+    the estimator (its history, not its noise belief) as bag_torques and the node do.
+    ValueError for an estimator without a covariance (NoCovariance), bad shapes or
+    non-increasing stamps."""
     q = np.ascontiguousarray(q, float)
     n = arm.nv
     if q.ndim != 2 or q.shape[1] != n:
@@ -59,7 +62,11 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
     out = {k: np.full((N, n), np.nan) for k in ("q", "qd", "qdd", "tau", "std", "var_est", "var_lag")}
     warm = np.zeros(N, bool)
     vel = qd is not None
+    gap = round(max_gap_s * 1e9)
     for k in range(N):
+        if k and not 0 < t_ns[k] - t_ns[k - 1] <= gap:
+            est.reset()
+            ts.reset()
         warm[k] = est.update(int(t_ns[k]), q[k], qd[k] if vel else None)
         out["q"][k], out["qd"][k], out["qdd"][k] = est.q, est.qd, est.qdd
         if ts.update(int(t_ns[k]), vel):
