@@ -78,6 +78,33 @@ def stream(arm, truth: Truth, noise_deg: float, vel_dps: float | None, seed: int
     return tuple(np.concatenate(x) for x in (errs, stds, ve, vl))
 
 
+def zoo_stream(arm, sensor, every: int, seed: int, **kw):
+    """(error, σ, σ_est², σ_lag²) of benchmarks/sensors.py's sensor over every `every`-th
+    movement: each after 0.5 s held, its own stream (a fresh estimator per movement: the API
+    call), joints the sensor does not measure held (their truth too), gaps dropped."""
+    from benchmarks import sensors
+    from forearm_dynamics.movements import movement_library
+
+    rng = np.random.default_rng(seed)
+    rate = sensor.rate_hz
+    errs, stds, ve, vl = [], [], [], []
+    for mv in movement_library()[::every]:
+        ev = sensors.held_movement(mv, sensor.measured)
+        t = np.concatenate([np.arange(-round(0.5 * rate), 0) / rate, mv.sample_times(rate)])
+        q, qd, qdd = ev(t)
+        keep, z, zv = sensors.stream(sensor, mv, q, qd, rng)
+        sel = np.flatnonzero(keep)
+        out = inverse_dynamics_with_std(arm, t[sel], z[sel], None if zv is None else zv[sel],
+                                        model=False, **kw)
+        i0 = int(np.searchsorted(t[sel], 0.0))
+        tau = arm.inverse_dynamics_batch(q[sel][i0:], qd[sel][i0:], qdd[sel][i0:])
+        errs.append(out.tau[i0:] - tau)
+        stds.append(out.std[i0:])
+        ve.append(out.var_est[i0:])
+        vl.append(out.var_lag[i0:])
+    return tuple(np.concatenate(x) for x in (errs, stds, ve, vl))
+
+
 def score(err: np.ndarray, std: np.ndarray, ve: np.ndarray, vl: np.ndarray) -> dict:
     """Per group: coverage, ratio, and the parts' RMS as ratios to the RMSE (est, lag)."""
     out = {}
@@ -151,19 +178,42 @@ def figure(arm, path: Path, seed: int = SEED) -> dict:
     return {"path": str(path), "movement": mv.id, "within_2sigma": cover}
 
 
+def table(section: dict) -> str:
+    """docs/uncertainty.md's calibration table from a results file (--table)."""
+    groups = ("pro_sup", "elbow", "wrist", "thumb", "fingers")
+    out = ["| input | σ | " + " | ".join(groups) + " | targets |", "|---|---|" + "---|" * (len(groups) + 1)]
+    for r in section["rows"]:
+        cells = [f"{r['groups'][g]['coverage']:.3f} / {r['groups'][g]['ratio']:.2f}" for g in groups]
+        out.append(f"| {r['row']} | {r['variant']} | " + " | ".join(cells)
+                   + f" | {'met' if r['met'] else 'missed'} |")
+    m = section["machine"]
+    out.append(f"\nLoad average {m['loadavg_start'][0]:.1f} at the start, {m['loadavg_end'][0]:.1f} at "
+               f"the end ({m['cores']} cores); {section['wall_time_s']:.0f} s; `{section['command']}`.")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--every", type=int, default=1, help="score every N-th movement (tuning: 4)")
     ap.add_argument("--gain", type=float, default=None, help="lag gain (default: lag.LAG_GAIN)")
     ap.add_argument("--tau", type=float, default=None,
                     help="jerk RMS time constant s (default: lag.JERK_TAU_S)")
-    ap.add_argument("--rows", default="", help="comma-separated zoo labels (default: all)")
+    ap.add_argument("--rows", default="", help="comma-separated row / zoo sensor names (default: all)")
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", default=str(HERE / "uncertainty.json"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--zoo", action=argparse.BooleanOptionalAction, default=True,
+                    help="also benchmarks/sensors.py's sensor zoo (held joints, coloured noise, "
+                         "spikes, quantisation, gaps)")
     ap.add_argument("--figure", default=str(HERE.parent / "docs" / "uncertainty.png"),
                     help="torque ± 2σ vs truth for one movement ('' = none)")
+    ap.add_argument("--table", action="store_true", help="print the docs table from --out, run nothing")
     args = ap.parse_args(argv)
+    if args.table:
+        import json
+
+        print(table(json.loads(Path(args.out).read_text())))
+        return 0
     wall = time.perf_counter()
     info = machine()
     arm = build_model("segmented")
@@ -184,6 +234,20 @@ def main(argv=None) -> int:
                          "variant": variant, "groups": groups, "met": met(groups),
                          "samples": len(err)})
             print(line(label, variant, groups), flush=True)
+    if args.zoo:
+        from benchmarks import sensors
+
+        for i, sensor in enumerate(sensors.zoo()):
+            if want and sensor.name not in want:
+                continue
+            for variant in args.variants.split(","):
+                kw = dict(VARIANTS[variant])
+                err, std, ve, vl = zoo_stream(arm, sensor, args.every, SEED + 100 + i, **kw)
+                groups = score(err, std, ve, vl)
+                rows.append({"row": f"zoo:{sensor.name}", "rate_hz": sensor.rate_hz,
+                             "sensor": sensor.name, "source": sensor.source, "variant": variant,
+                             "groups": groups, "met": met(groups), "samples": len(err)})
+                print(line(sensor.name, variant, groups), flush=True)
     info["loadavg_end"] = list(os.getloadavg())
     cal = [r for r in rows if r["variant"] == "calibrated"]
     command = "python benchmarks/uncertainty.py" + (f" --every {args.every}" if args.every > 1 else "")
