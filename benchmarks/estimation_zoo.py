@@ -38,12 +38,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import sensors
-from forearm_dynamics.analysis.filtering import analysis_config
 
 from forearm_dynamics.description import JOINT_NAMES
 from forearm_dynamics.dynamics import build_model
 from forearm_dynamics.estimation import make_estimator
 from forearm_dynamics.estimation.offline import zero_phase
+from forearm_dynamics.filtering import analysis_config
 from forearm_dynamics.movements import movement_library
 
 HERE = Path(__file__).resolve().parent
@@ -258,7 +258,12 @@ def main(argv=None) -> int:
     ap.add_argument("--recordings", type=Path, default=None,
                     help="directory with more OpenSim IK results (see benchmarks/data/README.md)")
     ap.add_argument("--only", default="", help="comma-separated sensor names (default: all)")
+    ap.add_argument("--table", action="store_true",
+                    help="print the docs/estimation.md tables from --out (no benchmark run)")
     args = ap.parse_args(argv)
+    if args.table:
+        print(tables(json.loads(Path(args.out).read_text(encoding="utf-8"))["estimation_zoo"]))
+        return 0
     wall = time.perf_counter()
     load0 = list(os.getloadavg())
     arm = build_model("segmented")
@@ -286,6 +291,60 @@ def main(argv=None) -> int:
     figure(curve, Path(args.figure))
     print(json.dumps(section["targets"], indent=1))
     return 0
+
+
+def tables(sec: dict) -> str:
+    """Markdown: per sensor and estimator, global NRMSE (%) per group, lag, us per sample;
+    the recordings; the delay-accuracy curve."""
+    groups = ("elbow", "pro_sup", "wrist", "thumb", "fingers")
+    out = [("| sensor | estimator | elbow | pro/sup | wrist | thumb | fingers | lag q̈ (ms) "
+            "| µs/sample p50 / p99 |"), "|---|---|---|---|---|---|---|---|---|"]
+    for s in sec["sensors"]:
+        for r in s["rows"]:
+            if r["estimator"] == "backward":
+                continue
+            g = r["groups"]
+            cpu = r.get("cpu_us")
+            out.append(f"| {s['sensor']} | {r['estimator']} | "
+                       + " | ".join(f"{100 * g[k]:.1f}" for k in groups)
+                       + f" | {r['lag_qdd_ms']:.0f} | "
+                       + (f"{cpu['p50']:.0f} / {cpu['p99']:.0f}" if cpu else "-") + " |")
+    out += ["", "| recording | rate | estimator | elbow | pro/sup | wrist | kalman / baseline |",
+            "|---|---|---|---|---|---|---|"]
+    for rec in sec["recordings"]:
+        rows = {r["estimator"]: r for r in rec["rows"]}
+        for r in rec["rows"]:
+            if r["estimator"] == "backward":
+                continue
+            g = r["groups"]
+            cells = " | ".join(f"{100 * g[k]:.1f}" if k in g else "-" for k in ("elbow", "pro_sup", "wrist"))
+            ratio = ""
+            if r["estimator"] == "kalman":
+                b = rows["baseline"]["groups"]
+                ratio = " / ".join(f"{g[k] / b[k]:.2f}" for k in ("elbow", "pro_sup") if k in g)
+            out.append(f"| {rec['recording']} | {rec['rate_hz']:.0f} Hz | {r['estimator']} | {cells} "
+                       f"| {ratio} |")
+    c = sec["delay_curve"]
+    ref = c["references"]
+    out += ["", "| delay | elbow | pro/sup | × offline floor (elbow / pro-sup) | µs/sample p50 |",
+            "|---|---|---|---|---|"]
+    fl = ref["offline_floor"]["groups"]
+    for p in c["points"]:
+        g = p["groups"]
+        out.append(f"| {1e3 * p['delay_s']:.0f} ms | {100 * g['elbow']:.2f} | {100 * g['pro_sup']:.2f} | "
+                   f"{g['elbow'] / fl['elbow']:.2f} / {g['pro_sup'] / fl['pro_sup']:.2f} | "
+                   f"{p['cpu_us']['p50']:.0f} |")
+    for lab in ("baseline", "opensimrt_style", "offline_floor"):
+        g = ref[lab]["groups"]
+        d = ref[lab].get("delay_s")
+        ratio = f"{g['elbow'] / fl['elbow']:.2f} / {g['pro_sup'] / fl['pro_sup']:.2f}"
+        cpu = f"{ref[lab]['cpu_us']['p50']:.0f}" if "cpu_us" in ref[lab] else "-"
+        out.append(f"| {lab}{'' if d is None else f' ({1e3 * d:.0f} ms)'} | {100 * g['elbow']:.2f} | "
+                   f"{100 * g['pro_sup']:.2f} | {ratio} | {cpu} |")
+    out += ["", (f"{sec['movements']} movements (every {sec['every']}th), load average "
+                 f"{sec['loadavg_start'][0]:.1f} at the start, {sec['loadavg_end'][0]:.1f} at the end; "
+                 f"{sec['wall_time_s']:.0f} s; `{sec['command']}`.")]
+    return "\n".join(out)
 
 
 def targets(sec: dict) -> dict:

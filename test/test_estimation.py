@@ -327,9 +327,9 @@ def jump_stream(dt: float, n: int, k_jump: int, jump: float, noise_deg: float = 
 
 @pytest.mark.parametrize(("dt", "vel"), [(1e-3, True), (1e-3, False), (0.01, False), (0.05, False)])
 def test_kalman_restarts_at_a_jump_and_is_exact_again(dt, vel) -> None:
-    """The jump sample is held back one sample (its output is the prediction: it could be a
-    marker swap), the next one confirms it: the filter restarts from the jump sample
-    (counted once) and from then on the estimate is exactly the new resting posture (q,
+    """The jump sample is held back one sample (it could be a marker swap) and output as a
+    restart gives it, the next one confirms it: the filter restarts from the jump sample
+    (counted once) and from the jump on the estimate is exactly the new resting posture (q,
     qd = 0, qdd = 0), as a fresh filter started there, where without the gate the innovation
     would ring through q, qd, qdd for its whole time constant. Online noise (the default)
     and a fixed noise alike."""
@@ -343,11 +343,15 @@ def test_kalman_restarts_at_a_jump_and_is_exact_again(dt, vel) -> None:
         eq, eqd, eqdd, warm = feed(e, t, q, qd if vel else None)
         assert e.discontinuities == 1 and e.describe(dt)["discontinuities"] == 1
         assert e.outliers == 0
-        np.testing.assert_allclose(eq[kj], eq[kj - 1], atol=0.02)  # the prediction: held back
-        np.testing.assert_array_equal(eq[kj + 1:], q[kj + 1:])
-        np.testing.assert_allclose(eqd[kj + 1:], 0.0, atol=1e-12)
-        np.testing.assert_allclose(eqdd[kj + 1:], 0.0, atol=1e-12)
-        assert warm[kj + (1 if vel else 2):].all() and (vel or not warm[kj + 1])  # warm-up again
+        # the jump sample is held back (it could be a marker swap) but, exact input, output as
+        # a restart gives it; the next confirms the jump and the filter restarts from it. At
+        # 20 Hz the motion's kink reads as 0.15 deg of white noise: not known exact, so the
+        # jump sample's output is the prediction, and the restart shows from the next one.
+        k0 = kj if dt <= 0.01 else kj + 1
+        np.testing.assert_array_equal(eq[k0:], q[k0:])
+        np.testing.assert_allclose(eqd[k0:], 0.0, atol=1e-12)
+        np.testing.assert_allclose(eqdd[k0:], 0.0, atol=1e-12)
+        assert (k0 > kj or not warm[kj]) and warm[kj + (1 if vel else 2):].all() and (vel or not warm[kj + 1])
 
 
 def test_kalman_jump_does_not_inflate_the_noise_estimate() -> None:

@@ -45,7 +45,12 @@ Gate (gate.py): a joint whose innovation exceeds 4 sigma + 1 deg is held back on
 an outlier (back at the next sample) is dropped and counted (`outliers`), a genuine sample
 is restored exactly, and one beyond 12 sigma + 0.15 rad that stays is a discontinuity: the
 filter restarts from it (q = the sample, qd = 0 or the given velocity, qdd = 0; warm after
-3 (2) samples; `discontinuities`). A withheld sample's output is the prediction.
+3 (2) samples; `discontinuities`). A withheld sample's output is the prediction, except
+beyond the discontinuity threshold on exact input (the held joints' white noise level at the
+floor; causal output): there it is the sample as a restart gives it (two movements played
+back to back jump 0.39-2.3 rad: the old posture for one sample was a pipeline error of
+995 % on a DOF that barely moves in the next movement). A noisy sensor's sample beyond it
+(a 20 deg marker swap) still outputs the prediction.
 
 Delay (estimator.delay_s, 0 = causal): the output is the fixed-lag smoothed estimate of the
 sample delay_s back (round(delay_s / dt) samples at the first step's dt), stamped with that
@@ -189,6 +194,7 @@ class KalmanCA(StateEstimator):
         self._smoother: FixedLagSmoother | None = None
         self._smooth_dt = 0.0
         self._first: tuple[int, np.ndarray] | None = None
+        self._jump_exact = False
         self.reset()
 
     # -- public state ---------------------------------------------------------------------
@@ -415,6 +421,9 @@ class KalmanCA(StateEstimator):
             self._held_t = t_ns
             np.multiply(e, h, out=self._held_e)
             e[:, h] = 0.0
+            if gate.jump:  # exact input (the joints' measured noise at the floor): a real jump
+                measured = self.noise_estimator.white(self._tmp)  # no movement near Nyquist
+                self._jump_exact = bool((measured[h] <= 2.0 * self._floor).all())
         np.multiply(self._Kp, e[0], out=x)  # correct
         if vel:
             np.multiply(self._Kv, e[1], out=self._tmp3)
@@ -436,6 +445,17 @@ class KalmanCA(StateEstimator):
         if self.delay_s <= 0.0:
             np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
             self.stamp_ns = t_ns
+            if self.gate.pending and self.gate.jump and self._jump_exact:
+                # held beyond the discontinuity threshold: most likely a jump (two movements
+                # back to back), so this one output is the sample as a restart would give it
+                # (q = the sample, qd = 0 or given, qdd = 0); the state waits for the next
+                self.q[:] = self._held_q
+                if vel:
+                    self.qd[:] = self._held_qd
+                else:
+                    self.qd.fill(0.0)
+                self.qdd.fill(0.0)
+                return False
             return warm
         sm = self._smoother
         if sm is None or not self._smooth_dt:
