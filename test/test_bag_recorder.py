@@ -170,7 +170,7 @@ def test_sigkill_keeps_the_closed_chunks(tmp_path, processes) -> None:
 def test_missing_output_directory_exits_2(tmp_path) -> None:
     out = tmp_path / "no" / "such" / "dir" / "run.mcap"
     rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=private_domain())
-    assert rec.wait(timeout=30) == 2
+    assert rec.wait(timeout=120) == 2
     err = [line for line in rec.output().splitlines() if line.strip()]
     assert len(err) == 1 and "does not exist" in err[0] and str(out) in err[0]
     assert not out.parent.exists()
@@ -180,7 +180,7 @@ def test_existing_output_is_never_overwritten(tmp_path) -> None:
     out = tmp_path / "keep.mcap"
     out.write_bytes(b"precious")
     rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=private_domain())
-    assert rec.wait(timeout=30) == 2
+    assert rec.wait(timeout=120) == 2
     assert "exists already" in rec.output()
     assert out.read_bytes() == b"precious"
 
@@ -188,6 +188,6 @@ def test_existing_output_is_never_overwritten(tmp_path) -> None:
 def test_unknown_topic_type_exits_2(tmp_path) -> None:
     rec = rosproc.start("bag_recorder", "-p", f"output:={tmp_path / 'x.mcap'}",
                         "-p", "topics:=[joint_states, mystery]", domain=private_domain())
-    assert rec.wait(timeout=30) == 2
+    assert rec.wait(timeout=120) == 2
     assert "mystery:pkg/msg/Type" in rec.output()
     assert not (tmp_path / "x.mcap").exists()

@@ -111,7 +111,7 @@ def test_invalid_parameters_exit_2(args: list[str], name: str) -> None:
     ros_args = [x for a in args for x in ("-p", a)]
     proc = rosproc.start("trajectory_publisher", *ros_args)
     try:
-        assert proc.wait(timeout=30) == 2, proc.output()
+        assert proc.wait(timeout=120) == 2, proc.output()
     finally:
         proc.stop(signal.SIGKILL)
     lines = [line for line in proc.output().splitlines() if line.strip()]
