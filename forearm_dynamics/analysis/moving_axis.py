@@ -37,6 +37,7 @@ from ..anthropometry import resolve_body_size
 from ..builders import build_tree
 from ..description import load_description
 from ..opensim_engine import _orthonormal, _osim, _vec3, build_osim_model
+from .placement import configured_overrides
 
 TILT_TOTAL_DEG = 7.14
 TRANSLATION_TOTAL_MM = 2.6
@@ -194,7 +195,7 @@ def moving_axis_comparison(overrides: dict, cache, fit_rate_hz: float = 100.0, t
         out["refit"] = {}
         for n in REFIT:
             v = VARIANTS[n]
-            base = overrides.get(n) or _config_overrides(n)
+            base = overrides.get(n) or configured_overrides(n)
             f = fit(v, fsc, start=start_of(v, base), callback=tick)
             e = sc.errors(v, **f["overrides"])
             out["refit"][n] = {"overrides": f["overrides"], "evaluations": f["evaluations"],
@@ -205,11 +206,3 @@ def moving_axis_comparison(overrides: dict, cache, fit_rate_hz: float = 100.0, t
     return {**out, "tilt_total_deg": TILT_TOTAL_DEG, "translation_total_mm": TRANSLATION_TOTAL_MM,
             "sources": SOURCES}
 
-
-def _config_overrides(name: str) -> dict:
-    spec = load_description().simplified.placements[name]
-    out = {"axis_offset_proximal": spec.axis_offset_proximal.tolist(),
-           "axis_offset_distal": spec.axis_offset_distal.tolist()}
-    if not isinstance(spec.split, str):
-        out["split"] = spec.split
-    return out

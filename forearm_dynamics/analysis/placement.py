@@ -74,6 +74,16 @@ HEADLINE = ("solid", "solid_mass_matched", "paper", "solid_parallel_axis", "para
             "solid_fitted_axis", "oblique")
 
 
+def configured_overrides(name: str) -> dict:
+    """A named placement's configured coordinates as explicit overrides (to perturb or refit)."""
+    spec = load_description().simplified.placements[name]
+    out = {"axis_offset_proximal": spec.axis_offset_proximal.tolist(),
+           "axis_offset_distal": spec.axis_offset_distal.tolist()}
+    if not isinstance(spec.split, str):
+        out["split"] = spec.split
+    return out
+
+
 def fitted_overrides(v: Variant, x: np.ndarray) -> dict:
     """Optimiser coordinates (split, offsets in cm) -> build overrides (offsets in m)."""
     out, k = {}, 0

@@ -22,7 +22,15 @@ from .. import get_movement
 from ..analysis.comparison import Trials, reference_filtered
 from ..analysis.elbow import elbow_analysis
 from ..analysis.errors import global_range
-from ..analysis.placement import HEADLINE, OBJECTIVE, VARIANTS, FitCache, Scorer, fit
+from ..analysis.placement import (
+    HEADLINE,
+    OBJECTIVE,
+    VARIANTS,
+    FitCache,
+    Scorer,
+    configured_overrides,
+    fit,
+)
 from ..analysis.report import _clean, errors_json, tables_markdown, update_readme, write_json
 from ..analysis.robustness import robustness
 from ..analysis.sensitivity import sensitivity
@@ -169,8 +177,8 @@ def main(argv: list[str] | None = None) -> int:
     all_overrides = {name: fits[name]["overrides"] if name in fits else {} for name in HEADLINE}
     # Sensitivity of the configured (shipped) placements: named ones use the config.
     sens_overrides = {n: ({} if VARIANTS[n].placement else o) for n, o in all_overrides.items()}
-    sens_overrides["parallel"] = _config_overrides("parallel")
-    sens_overrides["oblique"] = _config_overrides("oblique")
+    sens_overrides["parallel"] = configured_overrides("parallel")
+    sens_overrides["oblique"] = configured_overrides("oblique")
     results["sensitivity"] = sensitivity(ref, sens_overrides, cache, length,
                                          tick=lambda: bar.step("sensitivity"))
     _figures(args.out, nrmse, overrides, bar)
@@ -200,15 +208,6 @@ def _angle(a, b) -> float:
     c = abs(float(np.dot(a, b) / np.linalg.norm(a) / np.linalg.norm(b)))
     return float(np.degrees(np.arccos(min(1.0, c))))
 
-
-def _config_overrides(name: str) -> dict:
-    """A named placement's configured coordinates as explicit overrides (for perturbing)."""
-    spec = load_description().simplified.placements[name]
-    out = {"axis_offset_proximal": spec.axis_offset_proximal.tolist(),
-           "axis_offset_distal": spec.axis_offset_distal.tolist()}
-    if not isinstance(spec.split, str):
-        out["split"] = spec.split
-    return out
 
 
 def _figures(out: Path, nrmse: dict, overrides: dict, bar: Progress) -> None:
