@@ -243,6 +243,22 @@ def test_slow_latency_is_reported_not_failed(tmp_path, reference, capsys) -> Non
     assert report["delivery"]["latency_p99_ms_target"] == 1.0
 
 
+def test_old_stamps_say_latency_is_meaningless_and_name_restamp(tmp_path, reference, capsys) -> None:
+    """A replay of an old recording with markers: the stamps are 120 s older than their arrival,
+    so the latency measures the recording's age; the report says so and names restamp, the
+    data still pass, and a fresh run (0.3 ms) gets no such note."""
+    bag = tmp_path / "old.mcap"
+    write_run(bag, Run(latency_ns=120_000_000_000, movements=(1,)))
+    code, text = _check(bag, reference, capsys=capsys)
+    assert code == 0, text
+    assert "latency is meaningless here: the input stamps were 120.0 s old" in text
+    assert "restamp:=true" in text and "slow, not wrong" not in text
+    fresh = tmp_path / "fresh.mcap"
+    write_run(fresh, Run(movements=(1,)))
+    code, text = _check(fresh, reference, capsys=capsys)
+    assert code == 0 and "meaningless" not in text, text
+
+
 def test_latency_gates_only_when_asked(tmp_path, reference, capsys) -> None:
     bag = tmp_path / "slow.mcap"
     write_run(bag, Run(latency_ns=2_500_000, movements=(1,)))

@@ -66,6 +66,7 @@ from ..model_config import model_from_config
 from ..movements import get_movement, movement_library
 from ..offline.calibration import gate, score_calibration
 from ..offline.check import CheckReport, MovementResult, analyse
+from ..offline.delivery import old_stamps_note
 from ..offline.recording import read_config, read_recording
 from ..offline.thresholds import Thresholds
 from ..reference import ReferenceTorques, load_reference, read_reference
@@ -211,7 +212,10 @@ def latency_lines(report: CheckReport, th: Thresholds) -> list[str]:
             if th.latency_p99_ms_max is not None else
             "reported only: a slow machine is not wrong data (gate with --max-latency-p99-ms)")
     lines.append(f"  machine: {report.load.describe()}; latency {gate}")
-    if p99 > target:
+    old = old_stamps_note(report.delivery, th.old_stamps_latency_s)
+    if old:
+        lines.append(f"  note: {old}")
+    elif p99 > target:
         lines.append("  slow, not wrong: on a shared or loaded machine the nodes wait for a CPU, "
                      "and every wait adds to the latency")
     return lines

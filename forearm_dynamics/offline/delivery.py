@@ -106,3 +106,15 @@ def delivery(states: JointSeries | None, torques: JointSeries, grace_s: float) -
         p50, p99 = np.percentile(lat, [50, 99])
         d.latency_ms = {"p50": float(p50), "p99": float(p99), "max": float(lat.max())}
     return d
+
+
+def old_stamps_note(d: Delivery, old_stamps_latency_s: float) -> str | None:
+    """A replay of an old recording: its stamps are far older than any answer can take, so the
+    latency says how old the recording is, not how fast the node is; name the fix (restamp)."""
+    p50 = d.latency_ms.get("p50", float("nan"))
+    if not (np.isfinite(p50) and p50 > old_stamps_latency_s * 1e3):
+        return None
+    return (f"latency is meaningless here: the input stamps were {p50 / 1e3:.1f} s old on "
+            "arrival (a replay of an old recording); replay it with "
+            "`bag_player --ros-args -p restamp:=true` (stamps shifted to now, spacing "
+            "kept) to measure the node's latency")

@@ -33,7 +33,7 @@ from ..analysis.errors import rmse
 from ..estimation.offline import zero_phase
 from ..filtering import analysis_config
 from ..model_config import ModelChoice
-from .delivery import Delivery, delivery
+from .delivery import Delivery, delivery, old_stamps_note
 from .recording import Recording
 from .thresholds import Thresholds
 
@@ -164,14 +164,8 @@ def advice() -> str:
 
 def notes(report: ScoreReport, th: Thresholds) -> list[str]:
     """Lines that qualify the numbers without failing (old stamps)."""
-    out = []
-    p50 = report.delivery.latency_ms.get("p50", float("nan"))
-    if np.isfinite(p50) and p50 > th.old_stamps_latency_s * 1e3:
-        out.append(f"latency is meaningless here: the input stamps were {p50 / 1e3:.1f} s old on "
-                   "arrival (a replay of an old recording); replay it with "
-                   "`bag_player --ros-args -p restamp:=true` (stamps shifted to now, spacing "
-                   "kept) to measure the node's latency")
-    return out
+    note = old_stamps_note(report.delivery, th.old_stamps_latency_s)
+    return [note] if note else []
 
 
 def _verdicts(report: ScoreReport, th: Thresholds) -> list[str]:
