@@ -29,7 +29,11 @@ dropped (one noisy sample less): harmless either way. Genuine motion that crosse
 movements at 20-30 Hz) is restored: one sample of delay.
 At most MAX_PER_WINDOW held samples per noise window (0.25 s): more are not outliers but a
 sensor that got noisier, and are filtered normally so that the noise estimate can follow.
-The gate is armed once the noise estimate exists (at once with a fixed noise).
+The gate is armed once the noise estimate exists (at once with a fixed noise), or the white
+level does (third differences, a few samples; the gate judges with it until then): a stream
+whose timer stalls restarts the 10 Hz estimate at every stall over 3 periods (test_pipeline
+at load 4: 100 in 7.5 s) and never had one, so its gate stayed unarmed and every jump rang
+through the filter (check_bag 20-125 %).
 """
 
 from __future__ import annotations

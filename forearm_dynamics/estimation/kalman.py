@@ -91,6 +91,9 @@ BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
 MAX_DELAY_S = 0.2
 COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
+# the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
+# a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
+WHITE_ARM_EVALUATIONS = 25
 
 
 def _summary(r: np.ndarray, floor: float) -> float:
@@ -510,6 +513,15 @@ class KalmanCA(StateEstimator):
                 np.minimum(np.where(self._r > white, cap, np.inf), self._r, out=self._r)
                 np.maximum(self._r, self._floor, out=self._r)
             self._armed = moved = True
+        elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
+            # no 10 Hz estimate yet (a stream whose timer stalls restarts it at every stall and
+            # may never get one): the gate judges with the white level, measured in a few
+            # samples, rather than stay unarmed and let every jump ring through the filter
+            ne.white(self._r_gate)
+            np.maximum(self._r_gate, self._floor, out=self._r_gate)
+            for g in self._groups:
+                g.still = False  # the innovation stds again at the next step
+            self._armed = True
         if vel and self._fixed_rv is None and ne.velocity_ready:
             ne.velocity(self._rv)
             np.maximum(self._rv, self._floor, out=self._rv)
