@@ -82,8 +82,12 @@ def test_export_urdf_refuses_bad_personalisation():
     ({"env": {"ROS_DOMAIN_ID": "0"}}, "73"), ({}, "73")])
 def test_make_demo_takes_another_domain(how, domain):
     """`make demo` ran in domain 73 whatever the user asked (hard-coded in the recipe)."""
-    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"} | how.get("env", {})
-    r = subprocess.run(["make", "-n", "demo", *how.get("args", [])], cwd=ROOT, env=env,
+    # not as a sub-make of `make test` (CI): MAKELEVEL/MAKEFLAGS would make it print
+    # "make[1]: Entering directory" around the recipe and pass make test's own variables
+    drop = {"ROS_DOMAIN_ID", "MAKELEVEL", "MAKEFLAGS", "MFLAGS"}
+    env = {k: v for k, v in os.environ.items() if k not in drop} | how.get("env", {})
+    r = subprocess.run(["make", "--no-print-directory", "-n", "demo", *how.get("args", [])],
+                       cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode == 0, r.stderr
     assert f"ROS_DOMAIN_ID={domain} " in r.stdout.splitlines()[-1], r.stdout
