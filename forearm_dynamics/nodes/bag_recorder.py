@@ -57,7 +57,45 @@ from .params import ParameterError, Params, Spec, init_node
 from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 from .spec import Settings
 
-_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class _HeldStop:
+    """SIGINT/SIGTERM stop the recorder (KeyboardInterrupt), but never inside a write.
+
+    Why not pthread_sigmask around each write (the first version): a process-directed
+    signal that the main thread blocks is delivered to another thread (Fast DDS runs
+    several), whose C handler sets Python's flag, and the main thread raises
+    KeyboardInterrupt at its next bytecode all the same: inside mcap's writer, between a
+    record's write and its offset bookkeeping, that left a summary 4.5 kB before the data's
+    end (rosbags read a record length of 1e18 bytes; a fault-test run, SIGINT twice). This
+    Python handler, whichever thread took the signal, only notes it while a write runs;
+    the write's end raises it. The first stop is raised once: later signals are noted only
+    (closing must not be cut short; run() ignores them while the file is finished).
+    """
+
+    def __init__(self) -> None:
+        self.depth = 0  # writes in progress
+        self.pending = False
+        self.raised = False
+
+    def install(self) -> None:
+        for s in _STOP_SIGNALS:
+            signal.signal(s, self._on_signal)
+
+    def _on_signal(self, _signum, _frame) -> None:
+        if self.depth or self.raised:
+            self.pending = True
+            return
+        self.raised = True
+        raise KeyboardInterrupt
+
+    def release(self) -> None:
+        """After a write: raise the stop that came during it."""
+        if self.pending and not self.depth and not self.raised:
+            self.pending = False
+            self.raised = True
+            raise KeyboardInterrupt
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
 # History a latched subscription takes over when it matches: trajectory_publisher keeps its
 # last 100 markers, the torque node its last config; a burst of history must not overwrite
@@ -185,6 +223,7 @@ class BagRecorder(RealtimeNode, Node):
         # while the file is being made: a writer not yet made leaves no file behind (the
         # file is ours: created exclusively), a made one is finished as a complete bag.
         self.writer = None
+        self._held = _HeldStop()
         existed = path.exists()
         try:
             self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
@@ -201,6 +240,7 @@ class BagRecorder(RealtimeNode, Node):
                     self._streams.append((plan, topic, channel))
             self.create_timer(flush_period, self._flush_if_due)
             self.create_timer(DISCOVERY_POLL_S, self._adapt_qos)
+            self._held.install()  # from here a stop waits for the write it lands in
         except BagWriteError as exc:
             if self.writer is not None:
                 self.writer.abort()
@@ -220,26 +260,23 @@ class BagRecorder(RealtimeNode, Node):
     def _callback(self, channel: int, muted: set[int] | None = None):
         """The raw callback writing to `channel`; it drops what it gets once `channel` is in
         `muted` (a reliable subscription replaced by a best-effort one, see _adapt_qos)."""
-        write, now = self.writer.write, time.time_ns
-        mask, block, unblock = _STOP_SIGNALS, signal.SIG_BLOCK, signal.SIG_UNBLOCK
-        sigmask = signal.pthread_sigmask
+        write, now, held = self.writer.write, time.time_ns, self._held
 
         def on_message(data: bytes) -> None:
             if muted and channel in muted:
                 return
-            # SIGINT/SIGTERM held while the message is added: a signal raises KeyboardInterrupt
-            # in this thread at any bytecode, and inside mcap's add_message that left its
-            # statistics counting a message no chunk holds (rosbags then read 5688 messages of
-            # 5689 counted; a loaded fault-test run). Held, it is raised after the write. Cost:
-            # two system calls per message; `python -m benchmarks --sections recorder` gave
-            # 16.6 % CPU at 4000 msgs/s (12.1 % before) and 32 000 msgs/s kept up (>= 64 000).
-            sigmask(block, mask)
+            # SIGINT/SIGTERM held while the message is added (_HeldStop): a KeyboardInterrupt
+            # inside mcap's add_message left its statistics counting a message no chunk
+            # holds (rosbags then read 5688 messages of 5689 counted; a loaded fault-test run).
+            held.depth += 1
             try:
                 write(channel, data, now())
             except BagWriteError as exc:
                 self._stop(exc)
             finally:
-                sigmask(unblock, mask)
+                held.depth -= 1
+            if held.pending:
+                held.release()
 
         return on_message
 
@@ -266,13 +303,16 @@ class BagRecorder(RealtimeNode, Node):
             self.get_logger().info(f"{topic}: subscribed best effort, as its publisher(s) offer")
 
     def _flush_if_due(self) -> None:
-        signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)  # a chunk is written whole
+        held = self._held
+        held.depth += 1  # a chunk is written whole (_HeldStop)
         try:
             self.writer.flush_if_due()
         except BagWriteError as exc:
             self._stop(exc)
         finally:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+            held.depth -= 1
+        if held.pending:
+            held.release()
 
     def _stop(self, exc: BagWriteError) -> None:
         if not self.done.done():
