@@ -88,28 +88,31 @@ def movement_figure(res, torques, arm, ref, percentile) -> go.Figure:
                                                                    for n in names]]
         k = _thin(len(r))
         gold, gold_t = lowpass(r, ref.rate_hz)[k], (np.arange(len(r)) / ref.rate_hz)[k]
+    series = [(t, rec, "recorded", None, 1.5), (t, truth, "truth", "dash", 1)]
+    if gold is not None:
+        series.append((gold_t, gold, "reference (OpenSim, 6 Hz)", "dot", 1))
+    return _dof_group_figure(
+        names, series, "time since the movement's first sample (s)",
+        f"movement {res.id}: {res.name} (elbow {res.elbow}); solid recorded, dashed truth, "
+        "dotted reference")
+
+
+def _dof_group_figure(names, series, x_title: str, title: str) -> go.Figure:
+    """One row per DOF group, one colour per DOF, each series (t, values (N, J), label, dash,
+    width) drawn for every DOF in that colour: the movement and the segment pages alike."""
     groups = list(DOF_GROUPS.items())
     fig = make_subplots(rows=len(groups), cols=1, shared_xaxes=True, vertical_spacing=0.03,
                         subplot_titles=[f"{g} (N·m)" for g, _ in groups])
     for row, (_group, dofs) in enumerate(groups, start=1):
         for k, dof in enumerate(d for d in dofs if d in names):
             j, colour = names.index(dof), PALETTE[k % len(PALETTE)]
-            fig.add_trace(go.Scatter(x=_f32(t), y=_f32(rec[:, j]), name=f"{dof} recorded",
-                                     legendgroup=dof, line={"color": colour, "width": 1.5}),
-                          row=row, col=1)
-            fig.add_trace(go.Scatter(x=_f32(t), y=_f32(truth[:, j]), name=f"{dof} truth",
-                                     legendgroup=dof, line={"color": colour, "dash": "dash",
-                                                            "width": 1}), row=row, col=1)
-            if gold is not None:
-                fig.add_trace(go.Scatter(x=_f32(gold_t), y=_f32(gold[:, j]),
-                                         name=f"{dof} reference (OpenSim, 6 Hz)", legendgroup=dof,
-                                         line={"color": colour, "dash": "dot", "width": 1}),
-                              row=row, col=1)
-    fig.update_xaxes(title_text="time since the movement's first sample (s)", row=len(groups),
-                     col=1)
+            for ts, values, label, dash, width in series:
+                line = {"color": colour, "width": width} | ({"dash": dash} if dash else {})
+                fig.add_trace(go.Scatter(x=_f32(ts), y=_f32(values[:, j]), name=f"{dof} {label}",
+                                         legendgroup=dof, line=line), row=row, col=1)
+    fig.update_xaxes(title_text=x_title, row=len(groups), col=1)
     fig.update_layout(height=230 * len(groups), margin={"l": 60, "r": 20, "t": 60, "b": 40},
-                      title=f"movement {res.id}: {res.name} (elbow {res.elbow}); solid recorded, "
-                            "dashed truth, dotted reference", legend={"font": {"size": 9}})
+                      title=title, legend={"font": {"size": 9}})
     return fig
 
 
@@ -226,24 +229,11 @@ def segment_figure(report) -> go.Figure:
     keep = np.unique(np.linspace(0, len(stamps) - 1, min(len(stamps), SEGMENT_POINTS)).round()
                      .astype(int))
     t = (stamps[keep] - stamps[0]) / 1e9
-    groups = list(DOF_GROUPS.items())
-    fig = make_subplots(rows=len(groups), cols=1, shared_xaxes=True, vertical_spacing=0.03,
-                        subplot_titles=[f"{g} (N·m)" for g, _ in groups])
-    for row, (_group, dofs) in enumerate(groups, start=1):
-        for k, dof in enumerate(d for d in dofs if d in names):
-            j, colour = names.index(dof), PALETTE[k % len(PALETTE)]
-            fig.add_trace(go.Scatter(x=_f32(t), y=_f32(rec[keep, j]), name=f"{dof} recorded",
-                                     legendgroup=dof, line={"color": colour, "width": 1.5}),
-                          row=row, col=1)
-            fig.add_trace(go.Scatter(x=_f32(t), y=_f32(ref[keep, j]),
-                                     name=f"{dof} reference ({report.cutoff_hz:g} Hz positions)",
-                                     legendgroup=dof, line={"color": colour, "dash": "dash",
-                                                            "width": 1}), row=row, col=1)
-    fig.update_xaxes(title_text="time since the first compared sample (s)", row=len(groups), col=1)
-    fig.update_layout(height=230 * len(groups), margin={"l": 60, "r": 20, "t": 60, "b": 40},
-                      title="the recording as one segment: solid recorded, dashed reference",
-                      legend={"font": {"size": 9}})
-    return fig
+    return _dof_group_figure(
+        names, [(t, rec[keep], "recorded", None, 1.5),
+                (t, ref[keep], f"reference ({report.cutoff_hz:g} Hz positions)", "dash", 1)],
+        "time since the first compared sample (s)",
+        "the recording as one segment: solid recorded, dashed reference")
 
 
 def render_segment(report, rec, bag_info, code: int) -> str:
