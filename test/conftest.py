@@ -90,3 +90,12 @@ def _test_domain_leases():
     autouse fixture is set up first, so it is torn down after the module's own fixtures."""
     yield
     rosproc.release_test_domains()
+
+
+@pytest.fixture(scope="session")
+def paper_results() -> dict:
+    """results/paper/results.json as committed (the analysis' numbers the docs quote)."""
+    import json
+
+    path = Path(__file__).resolve().parents[1] / "results" / "paper" / "results.json"
+    return json.loads(path.read_text(encoding="utf-8"))

@@ -1,7 +1,6 @@
 """The paper's comparison: its model variants, the error measure, and that the committed
 results, the config defaults and the README agree."""
 
-import json
 import re
 import shutil
 from pathlib import Path
@@ -22,11 +21,6 @@ pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "paper"
-
-
-@pytest.fixture(scope="module")
-def results():
-    return json.loads((RESULTS / "results.json").read_text(encoding="utf-8"))
 
 
 def _yaml_forearm():
@@ -142,19 +136,19 @@ def test_hand_errors_vanish_when_the_forearm_is_still():
         assert np.nanmax(e.rmse[:, 2:]) < 1e-9
 
 
-def test_default_placement_is_what_the_results_report(results):
+def test_default_placement_is_what_the_results_report(paper_results):
     """config/model.yaml's placements = the fits reported in results.json, and the reported
     rows were computed with exactly what build_model builds."""
     s = load_description().simplified
-    assert results["default_placement"] == s.default_placement
+    assert paper_results["default_placement"] == s.default_placement
     for name in ("paper", "parallel", "oblique"):
         built = build_model("segmented", placement=name).placement.as_dict()
-        reported = results["variants"][name]["placement"]
+        reported = paper_results["variants"][name]["placement"]
         assert reported.keys() == built.keys()
         for k, v in built.items():
             assert reported[k] == (pytest.approx(v, abs=1e-12) if not isinstance(v, str) else v), (name, k)
     for name in ("parallel", "oblique"):
-        fitted = results["variants"][name]["fit"]["overrides"]
+        fitted = paper_results["variants"][name]["fit"]["overrides"]
         spec = s.placements[name]
         for key in ("axis_offset_proximal", "axis_offset_distal"):
             assert np.allclose(getattr(spec, key), fitted[key], atol=5e-6), (name, key)  # 0.01 mm
@@ -162,27 +156,27 @@ def test_default_placement_is_what_the_results_report(results):
             assert spec.split == pytest.approx(fitted["split"], abs=5e-5)
 
 
-def test_docs_and_tables_quote_results_json(results):
+def test_docs_and_tables_quote_results_json(paper_results):
     """docs/paper-discussion.md's generated blocks (reproduce_paper --blocks) and tables.md
     are results.json's; the README holds none (reproduce_paper never writes it)."""
     assert "<!-- generated:" not in (ROOT / "README.md").read_text(encoding="utf-8")
     readme = (ROOT / "docs" / "paper-discussion.md").read_text(encoding="utf-8")
     tables = (RESULTS / "tables.md").read_text(encoding="utf-8")
-    assert tables == tables_markdown(results)
+    assert tables == tables_markdown(paper_results)
     for key, fn in GENERATED.items():
         start, end = _block(key)
         assert start in readme and end in readme, key
         body = readme[readme.index(start) + len(start):readme.index(end)].strip()
-        assert body == fn(results), f"docs/paper-discussion.md block {key} differs from results.json"
+        assert body == fn(paper_results), f"docs/paper-discussion.md block {key} differs from results.json"
     # and the prose's own headline numbers: the solid / oblique pro/sup means
     head = readme[readme.index(_block("paper-headline")[0]):]
     for name in ("solid", "oblique"):
-        mean = 100 * results["models"][name]["p50"]["summary"]["pro_sup"]["nrmse"]["mean"]
+        mean = 100 * paper_results["models"][name]["p50"]["summary"]["pro_sup"]["nrmse"]["mean"]
         assert re.search(rf"\| {re.escape(f'{mean:.3g}')} \|", head), name
 
 
-def test_anatomical_model_reproduces_the_reference(results):
-    assert results["anatomical_self_check_rmse_max"] < 1e-9
+def test_anatomical_model_reproduces_the_reference(paper_results):
+    assert paper_results["anatomical_self_check_rmse_max"] < 1e-9
 
 
 @pytest.mark.parametrize("kwargs,message", [

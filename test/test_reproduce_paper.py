@@ -3,22 +3,13 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 pytestmark = [pytest.mark.cli, pytest.mark.slow]
 
-ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "results" / "paper"
 
-
-@pytest.fixture(scope="module")
-def results():
-    return json.loads((RESULTS / "results.json").read_text(encoding="utf-8"))
-
-
-def test_reproduce_paper_reuses_its_cache_and_reproduces_the_committed_numbers(tmp_path, results):
+def test_reproduce_paper_reuses_its_cache_and_reproduces_the_committed_numbers(tmp_path, paper_results):
     """A user's run into a new folder: no terminal (no progress bar), the committed cache
     (seeded from the checkout), the same numbers."""
     pytest.importorskip("matplotlib")
@@ -28,8 +19,8 @@ def test_reproduce_paper_reuses_its_cache_and_reproduces_the_committed_numbers(t
     assert r.stderr == ""  # no progress bar in a redirected log
     new = json.loads((tmp_path / "results.json").read_text(encoding="utf-8"))
     assert new["cache"]["misses"] == 0 and new["cache"]["hits"] > 10
-    for name in results["models"]:
-        for size, m in results["models"][name].items():
+    for name in paper_results["models"]:
+        for size, m in paper_results["models"][name].items():
             for group, metrics in m["summary"].items():
                 for metric, s in metrics.items():
                     got = new["models"][name][size]["summary"][group][metric]

@@ -1,7 +1,6 @@
 """The reviewer's questions: statistics, torque readings, scoring windows, leave-one-out
 folds, bodies; and that tables.md quotes results.json."""
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -25,11 +24,6 @@ pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "paper"
-
-
-@pytest.fixture(scope="module")
-def results():
-    return json.loads((RESULTS / "results.json").read_text(encoding="utf-8"))
 
 
 def test_cluster_bootstrap_resamples_whole_clusters():
@@ -140,33 +134,33 @@ def test_bodies_are_not_scaled_copies():
     assert sum(s > 0.1 for s in spread) >= 4
 
 
-def test_tables_quote_results_json(results):
+def test_tables_quote_results_json(paper_results):
     tables = (RESULTS / "tables.md").read_text(encoding="utf-8")
-    assert tables == tables_markdown(results)
+    assert tables == tables_markdown(paper_results)
     for key, fn in REVIEW_TABLES.items():
-        assert fn(results) in tables, key
-    assert claims_table(results) in tables
+        assert fn(paper_results) in tables, key
+    assert claims_table(paper_results) in tables
 
 
-def test_results_carry_every_review_section(results):
-    rv = results["review"]
+def test_results_carry_every_review_section(paper_results):
+    rv = paper_results["review"]
     assert set(rv["cases"]) == {"generalised/whole", "generalised/transition", "ulna_axis/whole",
                                 "ulna_axis/transition"}
     c = rv["cases"]["generalised/whole"]
     # the review's headline case is the headline table's numbers
     for name, s in c["summary"].items():
         assert s["prosup_nrmse"]["mean"] == pytest.approx(
-            results["models"][name]["p50"]["summary"]["pro_sup"]["nrmse"]["mean"], rel=1e-9)
-    assert len(results["lomo"]["variants"]["oblique"]["folds"]) == 13
-    assert set(results["body_proportions"]) == set(BODIES)
+            paper_results["models"][name]["p50"]["summary"]["pro_sup"]["nrmse"]["mean"], rel=1e-9)
+    assert len(paper_results["lomo"]["variants"]["oblique"]["folds"]) == 13
+    assert set(paper_results["body_proportions"]) == set(BODIES)
     assert rv["axes"]["wrench_on_prosup_axis_minus_generalised_max_nm"] < 1e-9
 
 
-def test_docs_paper_is_generated_from_results(results):
+def test_docs_paper_is_generated_from_results(paper_results):
     from forearm_dynamics.analysis.paper_doc import paper_markdown
 
     doc = (ROOT / "docs" / "paper.md").read_text(encoding="utf-8")
-    assert doc == paper_markdown(results)
+    assert doc == paper_markdown(paper_results)
     assert "**Verdict.**" in doc and "**The headline uses reading 1**" in doc
 
 
