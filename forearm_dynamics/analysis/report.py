@@ -114,21 +114,19 @@ def heldout_table(r: dict) -> str:
     v = r["validation"]
     lines = [("| fit on → scored on | placement | objective in-sample | objective held out | "
              "pro/sup NRMSE mean / median, in-sample | held out |"), "|---|---|---|---|---|---|"]
+
+    def row_line(label: str, name: str, row: dict) -> str:
+        i, h = row["in_sample"], row["held_out"]
+        return (f"| {label} | `{name}` | {pc(i['objective'])} | {pc(h['objective'])} | "
+                f"{pc(i['prosup_nrmse']['mean'])} / {pc(i['prosup_nrmse']['median'])} | "
+                f"{pc(h['prosup_nrmse']['mean'])} / {pc(h['prosup_nrmse']['median'])} |")
+
     for split, rows in v["halves"].items():
         a, b = split.split("_to_")
-        for name, row in rows.items():
-            i, h = row["in_sample"], row["held_out"]
-            lines.append(f"| {a} → {b} ({len(row['scored_on'])} movements) | `{name}` | "
-                         f"{pc(i['objective'])} | {pc(h['objective'])} | "
-                         f"{pc(i['prosup_nrmse']['mean'])} / {pc(i['prosup_nrmse']['median'])} | "
-                         f"{pc(h['prosup_nrmse']['mean'])} / {pc(h['prosup_nrmse']['median'])} |")
+        lines += [row_line(f"{a} → {b} ({len(row['scored_on'])} movements)", name, row)
+                  for name, row in rows.items()]
     for size, rows in v["body_sizes"].items():
-        for name, row in rows.items():
-            i, h = row["in_sample"], row["held_out"]
-            lines.append(f"| p50 → {size} (65 movements) | `{name}` | {pc(i['objective'])} | "
-                         f"{pc(h['objective'])} | "
-                         f"{pc(i['prosup_nrmse']['mean'])} / {pc(i['prosup_nrmse']['median'])} | "
-                         f"{pc(h['prosup_nrmse']['mean'])} / {pc(h['prosup_nrmse']['median'])} |")
+        lines += [row_line(f"p50 → {size} (65 movements)", name, row) for name, row in rows.items()]
     lines += ["", (f"%, {v['rate_hz']:.0f} Hz samples. Objective = pro/sup + elbow NRMSE, global "
                    "normalisation over all 65 movements. In-sample: the placement fitted on the "
                    "scored movements themselves (the best that placement family can do there); held out: "
