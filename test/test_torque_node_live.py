@@ -30,7 +30,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from forearm_dynamics import JOINT_NAMES
+from benchmarks.torque_node_rate import feed
 from forearm_dynamics.model_config import config_in_force, model_from_config
 from forearm_dynamics.nodes.common import stream_qos
 
@@ -59,24 +59,6 @@ IDS = (2, 3, 4, None, 5)
 
 def state(t_s: float) -> tuple[np.ndarray, np.ndarray]:
     return Q0 + V0 * t_s + 0.5 * ACC * t_s * t_s, V0 + ACC * t_s
-
-
-def _publish_replay(pub, t0: int, stamps: list[int]) -> None:
-    """~1 kHz; each sample stamped with the clock at publication, the state exact there."""
-    msg = JointState()
-    msg.name = list(JOINT_NAMES)
-    last = 0
-    for k in range(N):
-        delay = (t0 + k * MS - time.time_ns()) / 1e9
-        if delay > 0:
-            time.sleep(delay)
-        t = max(time.time_ns(), last + 1000)
-        last = t
-        q, qd = state((t - t0) * 1e-9)
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 1_000_000_000)
-        msg.position, msg.velocity = q.tolist(), qd.tolist()
-        pub.publish(msg)
-        stamps.append(t)
 
 
 def test_live_changes_during_a_1khz_replay() -> None:
@@ -117,7 +99,7 @@ def _live_changes_during_a_1khz_replay() -> None:
             if st.name.startswith("torque_node")), 100)
         stamps: list[int] = []
         t0 = time.time_ns() + 200 * MS
-        feeder = threading.Thread(target=_publish_replay, args=(pub, t0, stamps), daemon=True)
+        feeder = threading.Thread(target=feed, args=(pub, t0, MS, N, state, stamps), daemon=True)
         feeder.start()
         asked: list[tuple[int, dict, bool, object]] = []  # (wall ns, params, expected, future)
         for k, params, ok in CHANGES:
