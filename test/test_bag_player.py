@@ -110,21 +110,28 @@ def start_player(bag_path, lis: Listener, *ros_args: str):
                                "-r", f"{NS}/joint_states:={lis.ns}/joint_states")
 
 
+def play_through(bag_path, lis: Listener, count: int, *ros_args: str, clock: int = 0):
+    """Play the bag to its end on `lis`: `count` messages (and `clock` /clock ticks, within
+    10 s) received, the player exits 0; the listener is closed whatever happens."""
+    proc = start_player(bag_path, lis, *ros_args)
+    try:
+        lis.receive(proc, count)
+        if clock:
+            lis.peer.spin_until(lambda: len(lis.clock) >= clock, 10)
+        assert proc.wait(30) == 0, proc.output()
+    finally:
+        if proc.running():
+            proc.stop()
+        lis.close()
+    return proc
+
+
 def test_plays_every_message_in_order_never_early(bag):
     path, written = bag
     lis = Listener()
     status = []
     lis.subscribe(String, f"{lis.ns}/status", status.append, stream_qos(1000, reliable=False), raw=True)
-    proc = start_player(path, lis, "-p", "topics:=[joint_states, status]")
-    try:
-        lis.receive(proc, N)
-        assert proc.wait(30) == 0, proc.output()
-        # QoS as recorded: the best-effort topic is offered best effort, joint_states reliable
-        # (asked while the player ran: read from the listener's graph afterwards is too late)
-    finally:
-        if proc.running():
-            proc.stop()
-        lis.close()
+    proc = play_through(path, lis, N, "-p", "topics:=[joint_states, status]")
     assert [d for _, d in lis.got] == written["payloads"]  # byte for byte, in order
     # DDS pads a payload to 4 bytes on the wire: the recorded bytes, then zeros
     assert len(status) == len(written["status"])
@@ -165,14 +172,7 @@ def test_offered_qos_is_the_recorded_one(bag):
 def test_rate_scales_time(bag):
     path, written = bag
     lis = Listener()
-    proc = start_player(path, lis, "-p", "rate:=4.0")
-    try:
-        lis.receive(proc, N)
-        assert proc.wait(30) == 0, proc.output()
-    finally:
-        if proc.running():
-            proc.stop()
-        lis.close()
+    play_through(path, lis, N, "-p", "rate:=4.0")
     assert len(lis.got) == N
     t = np.array([r for r, _ in lis.got])
     span_bag = (written["logs"][-1] - written["logs"][0]) / 1e9
@@ -206,14 +206,7 @@ def test_restamp_shifts_stamps_to_now_keeping_spacing(bag):
     path, written = bag
     lis = Listener()
     before = time.time_ns()
-    proc = start_player(path, lis, "-p", "restamp:=true")
-    try:
-        lis.receive(proc, N)
-        assert proc.wait(30) == 0, proc.output()
-    finally:
-        if proc.running():
-            proc.stop()
-        lis.close()
+    play_through(path, lis, N, "-p", "restamp:=true")
     after = time.time_ns()
     stamps = np.array([stamp(d) for _, d in lis.got])
     assert len(stamps) == N
@@ -227,29 +220,14 @@ def test_restamp_shifts_stamps_to_now_keeping_spacing(bag):
 def test_remap(bag):
     path, written = bag
     lis = Listener("replayed")
-    proc = start_player(path, lis, "-r", f"{NS}/joint_states:={lis.ns}/replayed")
-    try:
-        lis.receive(proc, N)
-        assert proc.wait(30) == 0, proc.output()
-    finally:
-        if proc.running():
-            proc.stop()
-        lis.close()
+    play_through(path, lis, N, "-r", f"{NS}/joint_states:={lis.ns}/replayed")
     assert [d for _, d in lis.got] == written["payloads"]
 
 
 def test_clock(bag):
     path, written = bag
     lis = Listener(clock=True)
-    proc = start_player(path, lis, "-p", "clock:=true", "-p", "timing:=log")
-    try:
-        lis.receive(proc, N)
-        lis.peer.spin_until(lambda: len(lis.clock) >= N, 10)
-        assert proc.wait(30) == 0, proc.output()
-    finally:
-        if proc.running():
-            proc.stop()
-        lis.close()
+    play_through(path, lis, N, "-p", "clock:=true", "-p", "timing:=log", clock=N)
     # /clock carries the recorded time of each message, in order. A latest-value topic (the
     # player's writer keeps 10): a lagging reader on a loaded machine may miss ticks (18 of
     # 800 once), never get a wrong or reordered one; most arrive.
@@ -335,14 +313,7 @@ def test_plays_a_bag_written_by_another_rosbag2_writer(tmp_path):
             w.write(conn, t, data)
     assert len(list(out.glob("*.mcap"))) == 1
     lis = Listener()
-    proc = start_player(out, lis)  # the bag directory, as `ros2 bag record` leaves it
-    try:
-        lis.receive(proc, 300)
-        assert proc.wait(30) == 0, proc.output()
-    finally:
-        if proc.running():
-            proc.stop()
-        lis.close()
+    proc = play_through(out, lis, 300)  # the bag directory, as `ros2 bag record` leaves it
     got = [d for _, d in lis.got]
     assert len(got) == 300, proc.output()
     for d, o in zip(got, payloads, strict=True):
@@ -362,15 +333,8 @@ def test_timing_by_stamp_and_start_offset(tmp_path):
         for k, (_c, m) in enumerate(open_bag(path).messages()):
             out.write(ch, m.data, m.log_time + (1_000_000_000 if k >= 500 else 0))
     lis = Listener(clock=True)
-    proc = start_player(stalled, lis, "-p", "timing:=stamp", "-p", "clock:=true", "-p", "start_offset:=0.2")
-    try:
-        lis.receive(proc, 800)
-        lis.peer.spin_until(lambda: len(lis.clock) >= 800, 10)
-        assert proc.wait(30) == 0, proc.output()
-    finally:
-        if proc.running():
-            proc.stop()
-        lis.close()
+    play_through(stalled, lis, 800, "-p", "timing:=stamp", "-p", "clock:=true", "-p", "start_offset:=0.2",
+                 clock=800)
     got = [d for _, d in lis.got]
     assert got == w["payloads"][200:]  # 0.2 s in: from sample 200
     t = np.array([r for r, _ in lis.got])
