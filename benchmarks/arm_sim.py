@@ -49,9 +49,8 @@ from benchmarks.stats import (
     claim_domain_arg,
     loadavg,
     machine_info,
-    merge_results,
     percentiles,
-    write_json,
+    save_sections,
 )
 from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.codec.jointstate_cdr import STAMP, OutputTemplate
@@ -303,8 +302,7 @@ def main(argv=None) -> int:
         lease.release()  # the example claims its own domain
         new["closed_loop"] = closed_loop(args.domain)
     new["arm_sim_machine"] = machine_info()
-    cmd = "python benchmarks/arm_sim.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    write_json(args.out, merge_results(args.out, new, {"command": cmd.strip(), "started": started}))
+    save_sections(args.out, new, "benchmarks/arm_sim.py", argv, started)
     print(f"wrote {args.out}")
     return 0
 

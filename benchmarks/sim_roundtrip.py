@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from benchmarks.stats import loadavg, machine_info, merge_results, write_json
+from benchmarks.stats import loadavg, machine_info, save_sections
 from forearm_dynamics.dynamics import build_model
 from forearm_dynamics.movements import movement_library
 from forearm_dynamics.simulation import simulate
@@ -93,8 +93,7 @@ def main(argv=None) -> int:
         "dt": args.dt, "target_rad": TARGET, "sizes": per_size, "dt_sweep_male_50": sweep,
         "wall_s": wall, "loadavg_before": load_before, "loadavg_after": loadavg(),
         "machine": machine_info()}}
-    cmd = "python benchmarks/sim_roundtrip.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    write_json(args.out, merge_results(args.out, out, {"command": cmd.strip(), "started": started}))
+    save_sections(args.out, out, "benchmarks/sim_roundtrip.py", argv, started)
     print(f"wrote {args.out} (section roundtrip); {wall:.0f} s, load {load_before} -> {loadavg()}")
     return 0
 

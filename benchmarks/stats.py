@@ -12,6 +12,7 @@ import argparse
 import json
 import os
 import platform
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +78,13 @@ def merge_results(path: Path, new: dict, provenance: dict, sections: list[str] |
     record.update({key: dict(provenance) for key in (new if sections is None else sections)})
     merged["sections"] = record
     return merged
+
+
+def save_sections(path: Path, new: dict, script: str, argv: list[str] | None, started: str) -> None:
+    """Merge `new` into the results file at `path` (merge_results), each key recorded with the
+    command that made it (`python <script> <argv>`) and when it started."""
+    cmd = f"python {script} " + " ".join(argv if argv is not None else sys.argv[1:])
+    write_json(path, merge_results(path, new, {"command": cmd.strip(), "started": started}))
 
 
 def write_json(path: Path, data: dict) -> None:

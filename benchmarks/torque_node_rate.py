@@ -58,7 +58,7 @@ if __package__ in (None, ""):  # `python benchmarks/torque_node_rate.py` from th
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks.procstat import proc_stat
-from benchmarks.stats import claim_domain_arg, loadavg, machine_info, merge_results, percentiles, write_json
+from benchmarks.stats import claim_domain_arg, loadavg, machine_info, percentiles, save_sections
 from forearm_dynamics.exit_codes import DATA, OK
 from forearm_dynamics.processes import Child, ros_env
 
@@ -377,8 +377,7 @@ def main(argv: list[str] | None = None) -> int:
           f"({machine['cores']} cores)")
     for sec in new.values():
         sec["machine"] = machine
-    cmd = "python benchmarks/torque_node_rate.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    write_json(args.out, merge_results(args.out, new, {"command": cmd.strip(), "started": started}))
+    save_sections(args.out, new, "benchmarks/torque_node_rate.py", argv, started)
     bad = [k for k, sec in new.items() for key in ("lost", "repeated", "wrong_model",
                                                     "repeated_stamps", "repeated_values")
            if sec.get(key)]
