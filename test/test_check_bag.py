@@ -275,21 +275,21 @@ def test_latency_gates_only_when_asked(tmp_path, reference, capsys) -> None:
     assert code == 1 and "latency p99 2.500 ms > 2 ms" in text
 
 
-def test_without_config_assumes_default_model(tmp_path, reference, capsys) -> None:
-    bag = tmp_path / "noconfig.mcap"
-    write_run(bag, Run(config=False, movements=(1,)))
+@pytest.mark.parametrize("run, needle", [
+    # no config message: the default model is assumed, and said
+    (Run(config=False, movements=(1,)), "warning: no torque_node/config in the bag"),
+    # a solid-model run is checked against the solid model, not the default segmented
+    (Run(kind="solid", movements=(1,)), "model solid, body size p50 (from torque_node/config)"),
+    # no markers (any recording): not refused, analysed against its own filtered positions
+    # (offline/score.py; details in test_check_markerless.py)
+    (Run(markers=False, movements=(1,)), "no movement markers: one segment"),
+], ids=["no-config", "solid-model", "no-markers"])
+def test_run_variants_pass_and_say_what_was_assumed(tmp_path, reference, capsys, run, needle) -> None:
+    bag = tmp_path / "run.mcap"
+    write_run(bag, run)
     code, text = _check(bag, reference, capsys=capsys)
     assert code == 0, text
-    assert "warning: no torque_node/config in the bag" in text
-
-
-def test_other_model_from_config_is_used(tmp_path, reference, capsys) -> None:
-    """A solid-model run is checked against the solid model, not the default segmented."""
-    bag = tmp_path / "solid.mcap"
-    write_run(bag, Run(kind="solid", movements=(1,)))
-    code, text = _check(bag, reference, capsys=capsys)
-    assert code == 0, text
-    assert "model solid, body size p50 (from torque_node/config)" in text
+    assert needle in text
 
 
 def test_missing_reference_skips_model_error(good_bag, tmp_path, capsys) -> None:
@@ -341,16 +341,6 @@ def test_foreign_bags_exit_2(tmp_path, reference, run, needle, capsys) -> None:
     code, text = _check(bag, reference, capsys=capsys)
     assert code == 2
     assert needle in text and len(text.strip().splitlines()) == 1
-
-
-def test_run_without_markers_is_scored_as_one_segment(tmp_path, reference, capsys) -> None:
-    """No markers (any recording): not refused any more, analysed against its own filtered
-    positions (offline/score.py; details in test_check_markerless.py)."""
-    bag = tmp_path / "nomarkers.mcap"
-    write_run(bag, Run(markers=False, movements=(1,)))
-    code, text = _check(bag, reference, capsys=capsys)
-    assert code == 0, text
-    assert "no movement markers: one segment" in text
 
 
 def test_garbage_payloads_exit_2(tmp_path, reference, capsys) -> None:
