@@ -30,6 +30,7 @@ class TorquesWithStd:
     var_est: np.ndarray  # (N, n) the parts, N·m²
     var_lag: np.ndarray
     var_model: np.ndarray  # (n,)
+    var_subject: np.ndarray  # (N, n); 0 with subject "none"
     warm: np.ndarray  # (N,) bool
     parts: dict
 
@@ -38,12 +39,14 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
                               settings: dict | None = None, lag: bool = True, model: bool = True,
                               covariance: str = "noise", gain: float | None = None,
                               tau_s: float | None = None, t_in_ns: bool = False,
-                              max_gap_s: float = 0.1) -> TorquesWithStd:
+                              max_gap_s: float = 0.1, subject: str = "none",
+                              subject_measured=()) -> TorquesWithStd:
     """τ and σ for samples at t (s, increasing; ns with t_in_ns) of positions q (N, n) in
     arm.joint_names order, velocities qd (N, n) or None. A stamp step over max_gap_s resets
     the estimator (its history, not its noise belief) as bag_torques and the node do.
     ValueError for an estimator without a covariance (NoCovariance), bad shapes or
-    non-increasing stamps."""
+    non-increasing stamps. subject "ansur" adds the spread of the segment parameters at the
+    arm's stature and body mass (uncertainty/subject.py; subject_measured: the DIMS measured)."""
     q = np.ascontiguousarray(q, float)
     n = arm.nv
     if q.ndim != 2 or q.shape[1] != n:
@@ -57,9 +60,11 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
         raise ValueError(f"t must be ({len(q)},); got {t_ns.shape}")
     est = make_estimator(estimator, n, settings)
     extra = {k: v for k, v in (("gain", gain), ("tau_s", tau_s)) if v is not None}
-    ts = TorqueStd(arm, est, lag=lag, model=model, covariance=covariance, **extra)
+    ts = TorqueStd(arm, est, lag=lag, model=model, covariance=covariance, subject=subject,
+                   subject_measured=subject_measured, **extra)
     N = len(q)
-    out = {k: np.full((N, n), np.nan) for k in ("q", "qd", "qdd", "tau", "std", "var_est", "var_lag")}
+    out = {k: np.full((N, n), np.nan) for k in ("q", "qd", "qdd", "tau", "std", "var_est", "var_lag",
+                                              "var_subject")}
     warm = np.zeros(N, bool)
     vel = qd is not None
     gap = round(max_gap_s * 1e9)
@@ -72,6 +77,7 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
         if ts.update(int(t_ns[k]), vel):
             out["tau"][k], out["std"][k] = ts.tau, ts.std
             out["var_est"][k], out["var_lag"][k] = ts.prop.var_est, ts.prop.var_lag
+            out["var_subject"][k] = ts.prop.var_subject
         else:
             out["tau"][k] = arm.inverse_dynamics(est.q, est.qd, est.qdd)
     return TorquesWithStd(t_ns=t_ns, warm=warm, var_model=ts.model_var.copy(), parts=ts.parts(), **out)

@@ -106,6 +106,7 @@ class Propagator:
         self.tau = np.zeros(n)
         self.var_est = np.zeros(n)
         self.var_lag = np.zeros(n)
+        self.var_subject = np.zeros(n)  # set by the caller before a linearise (subject.py)
         self.std = np.zeros(n)
         self._const = np.zeros(n)  # var_est + model part + floor, since the last linearise
         self._gg = np.zeros((n, n))
@@ -155,6 +156,7 @@ class Propagator:
                 g = self.gain * (e[0] * d[0] + e[1] * d[1] + e[2] * d[2])
                 np.multiply(g, g, out=self._gg)
         np.add(self.var_est, self.model_var, out=self._const)
+        self._const += self.var_subject
         self._const += NUMERIC_FLOOR_VAR
 
     def __call__(self, q, qd, qdd, cov, lag_per_jerk, jerk_ms, relinearise: bool = True) -> np.ndarray:

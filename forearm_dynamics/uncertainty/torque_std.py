@@ -1,4 +1,4 @@
-"""One σ per torque, per sample: the estimation, lag and model parts put together.
+"""One σ per torque, per sample: the estimation, lag, model (and subject) parts put together.
 
 `TorqueStd` is what torque_node and the offline API both run after each estimator update:
 computeRNEADerivatives at the estimate (it returns τ as well, so the caller publishes
@@ -16,6 +16,7 @@ from .lag import JERK_TAU_S, LAG_GAIN, JerkTracker
 from .model_term import model_variance
 from .propagation import Propagator
 from .state_source import state_source
+from .subject import subject_spread
 
 #: the derivatives (∂τ/∂q, ∂τ/∂q̇, M), and with them the estimation part and the lag
 #: weights, are re-evaluated every RELINEARISE_S of stream time (at 1 kHz every 4th sample;
@@ -31,11 +32,14 @@ class NoCovariance(ValueError):
 class TorqueStd:
     """σ (N·m) of the torques of `arm` at the estimates of `est`, one call per update.
 
-    lag: include the calibrated lag part; model: include the model-simplification part.
+    lag: include the calibrated lag part; model: include the model-simplification part;
+    subject: "none" (default) or "ansur" (subject.py: the spread of the segment parameters
+    at this stature and body mass), subject_measured the dimensions the user measured.
     """
 
     def __init__(self, arm, est, *, lag: bool = True, model: bool = True, gain: float = LAG_GAIN,
-                 tau_s: float = JERK_TAU_S, covariance: str = "noise"):
+                 tau_s: float = JERK_TAU_S, covariance: str = "noise", subject: str = "none",
+                 subject_measured=()):
         src = state_source(est, covariance)
         if src is None:
             raise NoCovariance(f"estimator {est.name!r} carries no covariance: no torque σ "
@@ -45,6 +49,7 @@ class TorqueStd:
         mvar, self.model_source = model_variance(arm)
         self.model_var = mvar if model else np.zeros_like(mvar)
         self.prop = Propagator(arm.model, arm.model.createData(), self.model_var, gain)
+        self.subject = subject_spread(arm, subject, subject_measured)
         self.jerk = JerkTracker(arm.nv, tau_s)
         self.gain, self.tau_s = float(gain), float(tau_s)
         self.tau = self.prop.tau
@@ -69,6 +74,8 @@ class TorqueStd:
         lin = cov is not self._lin_cov or not 0.0 <= t_s - self._lin_t < RELINEARISE_S
         if lin:
             self._lin_cov, self._lin_t = cov, t_s
+            if self.subject is not None:  # at the same cadence as the estimation part
+                self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
         self.prop(est.q, est.qd, est.qdd, cov, src.lag if self.use_lag else None, jerk, lin)
         return True
 
@@ -76,7 +83,7 @@ class TorqueStd:
         """What the σ contains (the config message's `std` entry)."""
         return {
             "meaning": "one standard deviation (N·m) of each torque: estimation, lag and model parts "
-                       "added in quadrature",
+                       "added in quadrature" + (", and the subject part" if self.subject is not None else ""),
             "estimation": self.src.description["estimation"],
             "lag": (f"calibrated lag bias: gain {self.gain:g} x the estimator's error per unit jerk "
                     "x the RMS jerk (change of the qdd estimate over one qdd lag, noise part removed, "
@@ -87,6 +94,7 @@ class TorqueStd:
                       if self.use_model else "off"),
             "model_std_nm": dict(zip(self.arm.joint_names, np.sqrt(self.model_var).round(6).tolist(),
                                      strict=True)),
-            "subject_parameters": "not included (spread of segment parameters at a given stature "
-                                  "and mass: not done)",
+            "subject_parameters": (self.subject.description if self.subject is not None else
+                                   "off (subject none: the spread of segment parameters at this "
+                                   "stature and body mass is not in the sigma; subject ansur adds it)"),
         }
