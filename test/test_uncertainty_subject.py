@@ -12,6 +12,7 @@ joint torque regressor, Y Σ_π Yᵀ.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from pathlib import Path
 
@@ -284,3 +285,20 @@ def test_api_adds_the_part_and_the_config_states_it(arm):
     measured = TorqueStd(arm, make_estimator("kalman", arm.nv), subject="ansur", subject_measured=LENGTHS)
     assert "measured (no spread): forearm_length, hand_length, hand_breadth" in \
         measured.parts()["subject_parameters"]
+
+
+def test_docs_state_the_measured_numbers():
+    """docs/uncertainty.md part 4: the spread table is the JSON's, the size rows are what
+    benchmarks/uncertainty_subject.py last wrote (its own table format)."""
+    root = Path(__file__).resolve().parents[1]
+    doc = (root / "docs" / "uncertainty.md").read_text(encoding="utf-8")
+    groups = load_stats()["groups"]
+    for g, label in (("male", "male"), ("female", "female"), ("all", "all (pooled)")):
+        cells = " | ".join(f"{100 * s:.1f}" for s in groups[g]["residual_sd"])
+        assert f"| {label} | {groups[g]['n']} | {cells} |" in doc
+    bench = json.loads((root / "benchmarks" / "uncertainty_subject.json").read_text(encoding="utf-8"))
+    size = bench["subject"]["size"]
+    for name in ("male_50", "female_50"):
+        sig, tau = size[name]["sigma_subject_rms"], size[name]["tau_rms"]
+        cells = " | ".join(f"{sig[g]:.3g} ({100 * sig[g] / tau[g]:.1f} %)" for g in sig)
+        assert f"| {name} | {size[name]['group']} | {cells} |" in doc
