@@ -302,3 +302,26 @@ def test_docs_state_the_measured_numbers():
         sig, tau = size[name]["sigma_subject_rms"], size[name]["tau_rms"]
         cells = " | ".join(f"{sig[g]:.3g} ({100 * sig[g] / tau[g]:.1f} %)" for g in sig)
         assert f"| {name} | {size[name]['group']} | {cells} |" in doc
+
+
+def test_node_parameter_builds_the_part_and_states_it():
+    """torque_node's live subject_std (nodes/torque_config.py): the bundle's σ has the part and
+    its config says so; custom segment lengths count as measured; arm_sim and arm_viz, which
+    publish no σ, do not declare it."""
+    from forearm_dynamics.nodes.arm_sim_settings import SIM_MODEL_SPECS
+    from forearm_dynamics.nodes.arm_viz_settings import VIZ_MODEL_SPECS
+    from forearm_dynamics.nodes.torque_config import LIVE, MODEL_SPECS, ModelRequest, build_bundle
+
+    defaults = {s.name: s.default for s in MODEL_SPECS if s.name in LIVE}
+    off = build_bundle(ModelRequest.from_values(defaults), 1, 20, std="joint_torques_std")
+    assert off.std.subject is None and off.std_config["subject_parameters"].startswith("off")
+    on = build_bundle(ModelRequest.from_values({**defaults, "subject_std": "ansur"}), 2, 20, off,
+                      std="joint_torques_std")
+    assert on.std.subject.group == "male" and on.std.subject.measured == ()
+    assert "ANSUR II male (n = 4082)" in on.std_config["subject_parameters"]
+    custom = {**defaults, "subject_std": "ansur", "stature": 1.8, "body_mass": 80.0,
+              "forearm_length": 0.27, "hand_length": 0.19, "hand_breadth": 0.09}
+    measured = build_bundle(ModelRequest.from_values(custom), 3, 20, std="joint_torques_std")
+    assert measured.std.subject.group == "all" and measured.std.subject.measured == LENGTHS
+    assert "measured (no spread)" in measured.std_config["subject_parameters"]
+    assert all(s.name != "subject_std" for s in (*SIM_MODEL_SPECS, *VIZ_MODEL_SPECS))

@@ -16,12 +16,12 @@ from ..simulation import DEFAULT_DAMPING, METHODS, SimSettings
 from .common import EXECUTORS
 from .params import ParameterError, Params, Spec
 from .scheduling import REALTIME_SPECS
-from .torque_config import MODEL_SPECS, ModelRequest
+from .torque_config import MODEL_SPECS, TORQUE_STD_ONLY, ModelRequest
 
 #: torque_node's model parameters, one definition: read-only here (a running simulation
 #: keeps its arm; restart it for another).
 SIM_MODEL_SPECS = tuple(replace(s, live=False) for s in MODEL_SPECS
-                        if not s.name.startswith("estimator"))
+                        if not s.name.startswith("estimator") and s.name not in TORQUE_STD_ONLY)
 _MODEL_NAMES = tuple(s.name for s in SIM_MODEL_SPECS)
 
 

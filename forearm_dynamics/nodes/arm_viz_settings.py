@@ -10,12 +10,12 @@ from ..dynamics import ArmModel, build_model
 from ..estimation import DEFAULT_ESTIMATOR
 from ..viz.colors import GROUPS
 from .params import ParameterError, Params, Spec
-from .torque_config import MODEL_SPECS, ModelRequest
+from .torque_config import MODEL_SPECS, TORQUE_STD_ONLY, ModelRequest
 
 #: torque_node's model parameters, one definition (estimator settings aside: no estimator
 #: here). Live: a change rebuilds the drawn arm, unless a torque node's config is in force.
 VIZ_MODEL_SPECS = tuple(replace(s, live=True) for s in MODEL_SPECS
-                        if not s.name.startswith("estimator"))
+                        if not s.name.startswith("estimator") and s.name not in TORQUE_STD_ONLY)
 MODEL_NAMES = tuple(s.name for s in VIZ_MODEL_SPECS)
 
 VIEW_SPECS = (

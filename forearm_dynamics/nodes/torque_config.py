@@ -80,10 +80,17 @@ def _model_specs() -> tuple[Spec, ...]:
         Spec("estimator", DEFAULT_ESTIMATOR, "state estimator for velocity and acceleration",
              choices=tuple(ESTIMATORS), live=True),
         *est,
+        Spec("subject_std", "none", "the torque sigma's subject part (with publish_std): none, or "
+             "ansur = the ANSUR II spread of forearm and hand lengths and masses at this stature "
+             "and body mass (custom segment lengths given count as measured: no spread); "
+             "docs/uncertainty.md part 4", choices=("none", "ansur"), live=True),
     )
 
 
 MODEL_SPECS = _model_specs()
+#: model parameters that only shape the torque σ: not for nodes without one (arm_sim, arm_viz)
+TORQUE_STD_ONLY = frozenset({"subject_std"})
+_SUBJECT_DEFAULT = next(s.default for s in MODEL_SPECS if s.name == "subject_std")
 LIVE = frozenset(s.name for s in MODEL_SPECS)
 
 #: Partial joint sets (a mocap lab's arm, a glove's fingers): read-only
@@ -106,10 +113,10 @@ OUTPUT_SPECS = (
          "for this long (never extrapolate further)", "s", 0.001, 3600.0),
     Spec("publish_std", False, "publish std_topic: for every output, the same header and names with "
          "effort = one standard deviation of each torque (N*m; estimation, lag and model parts, "
-         "stated in ~/config; docs/uncertainty.md). Needs an estimator with a covariance (kalman) "
-         "and output_rate_hz 0; otherwise nothing is published there and ~/config says why. Off by "
-         "default: a second message per sample costs more than the budget at 1 kHz "
-         "(benchmarks/uncertainty_cost.py)"),
+         "and the subject part with subject_std ansur, stated in ~/config; docs/uncertainty.md). "
+         "Needs an estimator with a covariance (kalman) and output_rate_hz 0; otherwise nothing is "
+         "published there and ~/config says why. Off by default: a second message per sample "
+         "costs more than the budget at 1 kHz (benchmarks/uncertainty_cost.py)"),
     Spec("std_topic", "joint_torques_std", "JointState topic of the torques' standard deviations "
          "(remappable too)"),
 )
@@ -139,6 +146,7 @@ class ModelRequest:
     split: float | None
     estimator: str
     estimator_settings: tuple[tuple[str, float], ...]
+    subject_std: str = "none"  # the σ's subject part (uncertainty/subject.py)
 
     @classmethod
     def from_values(cls, v: dict[str, Any]) -> ModelRequest:
@@ -168,7 +176,8 @@ class ModelRequest:
         req = cls(kind, size, v["side"], float(v["payload_mass"]), com,
                   inertia if any(inertia) else None, placement, None if split == -1.0 else split,
                   v["estimator"], tuple((k.removeprefix("estimator."), float(x))
-                                        for k, x in sorted(v.items()) if k.startswith("estimator.")))
+                                        for k, x in sorted(v.items()) if k.startswith("estimator.")),
+                  v.get("subject_std", _SUBJECT_DEFAULT))
         try:  # the core's own checks (cheap), so a refused payload never reaches the worker
             make_payload(req.payload_mass, req.com_or_default(), req.payload_inertia, np.zeros(3))
         except ValueError as exc:
@@ -182,6 +191,11 @@ class ModelRequest:
             raise ParameterError("estimator.delay_s", f"{delay:g} s needs an estimator that smooths "
                                  f"with a delay (kalman); {req.estimator} is causal only")
         return req
+
+    def subject_measured(self) -> tuple[str, ...]:
+        """The segment lengths the user gave (custom anthropometry): measured, no spread."""
+        size = self.body_size if isinstance(self.body_size, dict) else {}
+        return tuple(d for d in ("forearm_length", "hand_length", "hand_breadth") if d in size)
 
     def settings_for(self, method: str) -> dict[str, float]:
         names = {s.name for s in ESTIMATORS[method].settings}
@@ -273,7 +287,9 @@ def build_bundle(request: ModelRequest, config_id: int, n: int,
     torque_std, std_config = None, {"published": False, "why": "publish_std is false"}
     if std is not None:
         try:
-            torque_std = TorqueStd(arm, est)
+            torque_std = TorqueStd(arm, est, subject=request.subject_std,
+                                   subject_measured=request.subject_measured()
+                                   if request.subject_std != "none" else ())
         except NoCovariance as exc:
             std_config = {"published": False, "why": str(exc)}
         else:
