@@ -77,6 +77,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--no-std", dest="std", action="store_false",
                     help="do not write <topic>_std (1σ per torque; written by default for estimators "
                          "with a covariance: kalman)")
+    ap.add_argument("--subject-std", default="none", choices=("none", "ansur"),
+                    help="the σ's subject part, as the node's subject_std: ansur adds the ANSUR II "
+                         "spread of forearm and hand at this stature and body mass "
+                         "(docs/uncertainty.md part 4; default none)")
     return ap.parse_args(argv)
 
 
@@ -113,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     res, counts = bag_torques(args.input, args.output, arm, estimator=args.estimator,
                               settings=settings, input_topic=args.input_topic, output_topic=args.topic,
                               max_gap_s=args.max_stamp_gap, cutoff_hz=args.cutoff,
-                              overwrite=args.overwrite, std=args.std)
+                              overwrite=args.overwrite, std=args.std, subject=args.subject_std)
     for w in res.warnings:
         print(f"{PROG}: warning: {w}", file=sys.stderr)
     n = len(res.stamps_ns)

@@ -87,12 +87,13 @@ def stamp_rules(stamps_ns: np.ndarray, max_gap_ns: int) -> np.ndarray:
 
 def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMATOR,
             settings: dict | None = None, max_gap_s: float = 0.1,
-            cutoff_hz: float | None = None, std: bool = True) -> OfflineResult:
+            cutoff_hz: float | None = None, std: bool = True, subject: str = "none") -> OfflineResult:
     """Torques of every kept sample; BagError when a joint of the model is never given.
 
     std: also the σ of every torque (uncertainty.TorqueStd, the node's publish_std: same
     numbers, inf while the estimate warms up) when the estimator carries a covariance;
-    `std_config` says what it contains or why there is none."""
+    `std_config` says what it contains or why there is none. subject: the σ's subject part,
+    "none" or "ansur" (the node's subject_std; uncertainty/subject.py)."""
     if estimator not in ESTIMATORS:
         raise UsageError(f"estimator must be one of {', '.join(ESTIMATORS)}, got {estimator!r}")
     missing = [n for j, n in enumerate(arm.joint_names) if not np.isfinite(stream.position[:, j]).any()]
@@ -125,7 +126,7 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
         ts = None
         if std:
             try:
-                ts = TorqueStd(arm, est)
+                ts = TorqueStd(arm, est, subject=subject)
             except NoCovariance as exc:
                 std_config = {"published": False, "why": str(exc)}
             else:
@@ -243,13 +244,13 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT
                 settings: dict | None = None, input_topic: str = "joint_states",
                 output_topic: str = "joint_torques", max_gap_s: float = 0.1,
                 cutoff_hz: float | None = None, overwrite: bool = False,
-                std: bool = True) -> tuple[OfflineResult, dict]:
+                std: bool = True, subject: str = "none") -> tuple[OfflineResult, dict]:
     src, dst = Path(src), Path(dst)
     if dst.exists() and src.resolve() == dst.resolve():
         raise OutputExists(f"{dst}: the output must be another file than the input")
     bag = open_bag(src)
     stream = read_joint_series(bag, input_topic, arm.joint_names)
-    res = compute(stream, arm, estimator, settings, max_gap_s, cutoff_hz, std)
+    res = compute(stream, arm, estimator, settings, max_gap_s, cutoff_hz, std, subject)
     if not bag.info.complete:
         res.warnings.insert(0, f"{src} is truncated ({bag.info.problem}); using the "
                             f"{bag.info.message_count} messages of its complete chunks")
