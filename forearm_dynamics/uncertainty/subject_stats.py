@@ -148,9 +148,13 @@ def main(argv=None) -> int:
     p.add_argument("--from-ansur", type=Path, metavar="DIR",
                    help="first re-extract the subset from the full survey CSVs in DIR")
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
-    if args.from_ansur is not None:
-        print(f"wrote {extract_subset(args.from_ansur)}")
-    doc, _ = derive()
+    try:
+        if args.from_ansur is not None:
+            print(f"wrote {extract_subset(args.from_ansur)}")
+        doc, _ = derive()
+    except (OSError, ValueError) as exc:  # a missing file (an installed package has no subset)
+        print(f"subject_stats: error: {exc} (run it in a source checkout)", file=sys.stderr)
+        return 2
     out = Path(__file__).resolve().parents[1] / "data" / TABLE
     out.write_text(json.dumps(doc, indent=1) + "\n")
     for g in GROUPS:
