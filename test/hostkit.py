@@ -3,12 +3,14 @@
     with TwoHosts() as hosts:
         a = hosts.a.start(["torque_node", ...], env)       # a process inside host A
         hosts.a.loss(1)                                     # drop 1 % of A's incoming UDP
+    with TwoHosts(multicast=False) as hosts:                # a network without multicast
+        hosts.b.nft("table inet fw { ... }")                # any rule set (a firewall)
 
 The pair has addresses in 192.0.2.0/30 (RFC 5737 TEST-NET-1: documentation only, never
 routed anywhere) and a multicast route (224.0.0.0/4) on the veth; each namespace has its
 own loopback and no other interface or route, so nothing but the other host is reachable
 from inside, and nothing from outside reaches in. Needs root (CAP_NET_ADMIN) and `ip`;
-`nft` (nftables, for the loss rules) is installed with apt-get when missing.
+`nft` (nftables, for the loss, multicast and firewall rules) is installed with apt-get when missing.
 
 Teardown always runs: the context manager's exit (also after a failing test or a
 KeyboardInterrupt) kills every process inside the namespaces (by PID, from `ip netns pids`:
@@ -148,6 +150,31 @@ class Host:
             if r.returncode:
                 raise RuntimeError(f"nft {' '.join(cmd)}: {r.stderr.strip()}")
 
+    def nft(self, ruleset: str) -> None:
+        """Load an nftables rule set (`nft -f` syntax) into this host's namespace; it goes
+        with the namespace at teardown."""
+        r = self.run([ensure_nft(), "-f", "/dev/stdin"], input=ruleset)
+        if r.returncode:
+            raise RuntimeError(f"{self.ns}: nft -f: {r.stderr.strip()}\n{ruleset}")
+
+    def counters(self, table: str) -> list[int]:
+        """Packets counted by each `counter` of an inet table, in rule order."""
+        out = self.run([ensure_nft(), "list", "table", "inet", table]).stdout
+        return [int(part.split()[0]) for part in out.split("counter packets ")[1:]]
+
+    def block_multicast(self) -> None:
+        """Drop every IPv4 multicast packet this host sends or receives: a network without
+        multicast (many Wi-Fi, cloud and VPN networks). The multicast route stays, so DDS
+        still sends its announcements and the counters show them dropped."""
+        self.nft("table inet fdnomcast {\n"
+                 "  chain output { type filter hook output priority 0; ip daddr 224.0.0.0/4 counter drop; }\n"
+                 "  chain input { type filter hook input priority 0; ip daddr 224.0.0.0/4 counter drop; }\n"
+                 "}\n")
+
+    def multicast_dropped(self) -> int:
+        """Multicast packets block_multicast's rules dropped so far."""
+        return sum(self.counters("fdnomcast"))
+
     def dropped(self) -> int:
         """Packets the loss rules dropped so far (0 without rules)."""
         nft = ensure_nft()
@@ -156,9 +183,11 @@ class Host:
 
 
 class TwoHosts:
-    """Two namespaces A and B joined by a veth pair in SUBNET; always torn down."""
+    """Two namespaces A and B joined by a veth pair in SUBNET; always torn down.
+    multicast=False: both hosts drop all multicast (Host.block_multicast)."""
 
-    def __init__(self) -> None:
+    def __init__(self, multicast: bool = True) -> None:
+        self.multicast = multicast
         why = can_make_hosts()
         if why:
             raise RuntimeError(why)
@@ -192,6 +221,8 @@ class TwoHosts:
                 r = h.run(cmd)
                 if r.returncode:
                     raise RuntimeError(f"{h.ns}: {' '.join(cmd)}: {r.stderr.strip()}")
+            if not self.multicast:
+                h.block_multicast()
 
     def close(self) -> None:
         """Kill every process inside, delete both namespaces (the veth pair goes with them)."""

@@ -1,0 +1,221 @@
+"""Two hosts on networks that are not a plain multicast LAN (hostkit.py; docs/two-hosts.md
+"Running it"): without multicast, SUBNET discovery finds nothing, ROS_STATIC_PEERS or a Fast
+DDS discovery server (the wheels' `fastdds discovery`) make the torques cross; behind a
+firewall that lets only the RTPS ports of the domain through, the torques cross and B sees
+A's node, and with the ports of another domain, or without the user-data ports, nothing
+crosses. The discovery-server run is the whole lab pipeline (torque_node in A; publisher
+and recorder in B), and B's bag checks clean with check_bag.
+
+`make test-hosts` (root; CI runs it after `make test`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import hostkit
+import pytest
+import rosproc
+
+from forearm_dynamics.processes import BIN
+
+pytestmark = pytest.mark.hosts
+
+_why = hostkit.can_make_hosts()
+if _why:
+    pytest.skip(_why, allow_module_level=True)
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+DS_PORT = 11811  # Fast DDS's default discovery server port
+#: Processes per host the firewall opens ports for (participant ids 0..3)
+PARTICIPANTS = 4
+
+
+def host_env(domain: int, log_dir: Path, **extra: str) -> dict[str, str]:
+    """ROS environment inside a namespace: SUBNET discovery, UDP only (shared memory would
+    carry the data past the veth between two namespaces of one machine)."""
+    env = rosproc.processes.ros_env(domain, log_dir)
+    env.update(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", FASTDDS_BUILTIN_TRANSPORTS="UDPv4", **extra)
+    return env
+
+
+def rtps_ports(domain: int, participants: int = PARTICIPANTS, user: bool = True) -> list[int]:
+    """UDP ports RTPS (DDS-RTPS 2.x, 9.6.1.1; Fast DDS's defaults) listens on for a domain:
+    PB 7400, DG 250, PG 2; discovery multicast PB + DG·d, discovery unicast PB + DG·d + 10 +
+    PG·p, user unicast PB + DG·d + 11 + PG·p for participant p (one per ROS process)."""
+    base = 7400 + 250 * domain
+    ports = [base] + [base + 10 + 2 * p for p in range(participants)]
+    if user:
+        ports += [base + 11 + 2 * p for p in range(participants)]
+    return sorted(ports)
+
+
+#: Fast DDS's "unique network flow" readers listen on the first free port of portBase - 400
+#: .. portBase (7000-7399) whatever the domain: one per process of these wheels (measured,
+#: `ss -uanp`: each rclpy process listens on 7000, the next one on 7001); ROS's graph topic
+#: crosses there, so without them the other host's node names are not seen.
+FLOW_PORTS = list(range(7000, 7000 + PARTICIPANTS))
+
+
+def firewall(host: hostkit.Host, ports: list[int]) -> None:
+    """Only these UDP ports come in over the veth; every other UDP packet is counted, dropped."""
+    allowed = ", ".join(map(str, ports))
+    host.nft("table inet fdfw {\n"
+             "  chain input { type filter hook input priority 0;\n"
+             f"    iifname \"{host.veth}\" udp dport {{ {allowed} }} accept\n"
+             f"    iifname \"{host.veth}\" meta l4proto udp counter drop\n"
+             "  }\n}\n")
+
+
+def start_node(h: hostkit.TwoHosts, env: dict[str, str], tmp: Path):
+    return h.a.start([str(BIN / "torque_node")], env, tmp / "a_node.log")
+
+
+def ask(h: hostkit.TwoHosts, env: dict[str, str], timeout_s: float) -> subprocess.CompletedProcess:
+    """examples/torque_client.py in host B: exit 0 once torque_node in A answered its posture;
+    1 'no torque_node' (never matched) or 'did not answer' (matched, no torque) after timeout_s."""
+    code = (f"import sys; sys.path.insert(0, {str(EXAMPLES)!r}); import torque_client; "
+            f"sys.exit(torque_client.main({timeout_s}))")
+    return h.b.run([sys.executable, "-c", code], env=env, timeout=timeout_s + 120)
+
+
+_NAMES = ("import sys, time, rclpy\nrclpy.init()\nn = rclpy.create_node('probe')\n"
+          "end = time.monotonic() + float(sys.argv[1])\n"
+          "while time.monotonic() < end and 'torque_node' not in n.get_node_names():\n"
+          "    rclpy.spin_once(n, timeout_sec=0.1)\nprint(sorted(n.get_node_names()))\n")
+
+
+def node_names(h: hostkit.TwoHosts, env: dict[str, str], timeout_s: float) -> str:
+    """The ROS node names host B sees (the graph, carried by ROS's own discovery topic)."""
+    return h.b.run([sys.executable, "-c", _NAMES, str(timeout_s)], env=env,
+                   timeout=timeout_s + 120).stdout.strip()
+
+
+def test_without_multicast_subnet_discovery_finds_nothing(tmp_path):
+    """The harness really has no multicast: both hosts announce (the drop counters count
+    it) and nobody hears; SUBNET discovery is multicast only, so the client never matches."""
+    domain = rosproc.test_domain(102, 139)
+    with hostkit.TwoHosts(multicast=False) as h:
+        start_node(h, host_env(domain, tmp_path), tmp_path)
+        r = ask(h, host_env(domain, tmp_path), 10)
+        dropped = (h.a.multicast_dropped(), h.b.multicast_dropped())
+    assert r.returncode == 1 and "no torque_node" in r.stderr, r
+    assert min(dropped) > 0, dropped
+
+
+def test_static_peers_cross_without_multicast(tmp_path):
+    """ROS_STATIC_PEERS (Jazzy; rmw_fastrtps adds them as unicast initial peers) on one host
+    is enough: A learns B from B's unicast announcement and answers it."""
+    domain = rosproc.test_domain(102, 139)
+    with hostkit.TwoHosts(multicast=False) as h:
+        start_node(h, host_env(domain, tmp_path), tmp_path)
+        r = ask(h, host_env(domain, tmp_path, ROS_STATIC_PEERS=hostkit.ADDR_A), 60)
+        dropped = h.b.multicast_dropped()
+    assert r.returncode == 0 and "elbow_flexion" in r.stdout, r
+    assert dropped > 0, dropped  # multicast was tried (SUBNET keeps it) and went nowhere
+
+
+def test_fastdds_discovery_needs_the_venv_first_on_path(tmp_path):
+    """`fastdds` (a sh script of the Fast DDS wheel) runs `python3` from PATH: the venv's
+    python sets the library path the server binary needs (ros_wheels_bootstrapper; the
+    discovery-server test below starts it so); another python3 leaves the binary without
+    libfastrtps. Docs: activate the venv first. Run inside host A (should it start after all,
+    it listens only there)."""
+    env = {**rosproc.processes.ros_env(rosproc.test_domain(102, 139), tmp_path),
+           "PATH": "/usr/bin:/bin"}
+    with hostkit.TwoHosts() as h:
+        r = h.a.run([str(BIN / "fastdds"), "discovery", "-i", "0", "-l", hostkit.ADDR_A],
+                    env=env, timeout=60)
+    assert "libfastrtps" in r.stdout + r.stderr and "Server is running" not in r.stdout, r
+
+
+def _pipeline(h: hostkit.TwoHosts, tmp: Path, env_a: dict, env_b: dict, movements: str) -> dict:
+    """torque_node in A; trajectory_publisher + bag_recorder in B; check_bag on B's bag.
+    start_delay 8 s: B's recorder matches A's joint_torques a moment after the publisher's
+    subscribers match (test_two_hosts.py)."""
+    bag = tmp / "b.mcap"
+    node = start_node(h, env_a, tmp)
+    rec = h.b.start([str(BIN / "bag_recorder"), "--ros-args", "-p", f"output:={bag}"], env_b,
+                    tmp / "b_rec.log")
+    pub = h.b.start([str(BIN / "trajectory_publisher"), "--ros-args", "-p", f"movements:={movements}",
+                     "-p", "start_delay:=8.0", "-p", "min_subscribers:=2", "-p",
+                     "subscriber_timeout:=60.0"], env_b, tmp / "b_pub.log")
+    assert pub.wait(timeout=240) == 0, (tmp / "b_pub.log").read_text()[-2000:]
+    for p in (rec, node):
+        p.send_signal(2)
+        assert p.wait(timeout=30) == 0
+    report = tmp / "check.json"
+    r = subprocess.run([str(BIN / "check_bag"), str(bag), "--json", str(report)], check=False,
+                       capture_output=True, text=True, timeout=300)
+    return {"code": r.returncode, "out": r.stdout + r.stderr,
+            "report": json.loads(report.read_text()) if report.exists() else None,
+            "node_log": (tmp / "a_node.log").read_text()}
+
+
+def test_discovery_server_pipeline_without_multicast_checks_clean(tmp_path):
+    """The lab's deployment on a network without multicast: `fastdds discovery` (from the
+    wheels) in A, every process a client (ROS_DISCOVERY_SERVER); 6 movements at 1 kHz from B,
+    B records, and check_bag passes B's bag (exit 0: nothing lost, every recorded torque
+    what the model gives for the recorded joint_states)."""
+    domain = rosproc.test_domain(102, 139)
+    ds = {"ROS_DISCOVERY_SERVER": f"{hostkit.ADDR_A}:{DS_PORT}"}
+    with hostkit.TwoHosts(multicast=False) as h:
+        server_env = {**host_env(domain, tmp_path), "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
+        server = h.a.start(["fastdds", "discovery", "-i", "0", "-l", hostkit.ADDR_A, "-p",
+                            str(DS_PORT)], server_env, tmp_path / "a_server.log")
+        res = _pipeline(h, tmp_path, host_env(domain, tmp_path, **ds), host_env(domain, tmp_path, **ds),
+                        "[1, 2, 3, 6, 7, 8]")
+        server_alive = server.poll() is None
+        dropped = (h.a.multicast_dropped(), h.b.multicast_dropped())
+    server_log = (tmp_path / "a_server.log").read_text()
+    assert "Participant Type:   SERVER" in server_log and server_alive, server_log
+    assert dropped == (0, 0), dropped  # discovery-server clients never multicast
+    assert res["report"] is not None, res["out"][-3000:]
+    delivery = res["report"]["delivery"]
+    assert delivery["joint_states"] > 0 and delivery["lost"] == 0, delivery
+    assert res["code"] == 0 and res["report"]["exit_code"] == 0, res["out"][-3000:]
+    assert res["report"]["failures"] == [], res["report"]["failures"]
+
+
+def test_firewall_with_only_the_rtps_ports_lets_the_torques_through(tmp_path):
+    """Both hosts drop every incoming UDP packet but the domain's RTPS ports and the
+    unique-flow ports: the torques cross, B sees A's node, and not one UDP packet went to
+    another port (the port list is complete for these wheels)."""
+    domain = rosproc.test_domain(102, 139)
+    with hostkit.TwoHosts() as h:
+        for host in (h.a, h.b):
+            firewall(host, rtps_ports(domain) + FLOW_PORTS)
+        start_node(h, host_env(domain, tmp_path), tmp_path)
+        r = ask(h, host_env(domain, tmp_path), 60)
+        names = node_names(h, host_env(domain, tmp_path), 30)
+        dropped = (h.a.counters("fdfw"), h.b.counters("fdfw"))
+    assert r.returncode == 0 and "elbow_flexion" in r.stdout, r
+    assert "torque_node" in names, names
+    assert dropped == ([0], [0]), dropped
+
+
+def test_firewall_for_another_domain_or_without_user_ports_stops_them(tmp_path):
+    """The same firewall computed for another domain: no discovery at all; with the
+    discovery ports only (no user unicast): the endpoints match but no torque arrives."""
+    domain, other = rosproc.test_domain(102, 139), rosproc.test_domain(102, 139)
+    assert domain != other
+    with hostkit.TwoHosts() as h:
+        for host in (h.a, h.b):
+            firewall(host, rtps_ports(other) + FLOW_PORTS)
+        start_node(h, host_env(domain, tmp_path / "d"), tmp_path / "d")
+        wrong = ask(h, host_env(domain, tmp_path / "d"), 10)
+        dropped_wrong = h.a.counters("fdfw")
+    with hostkit.TwoHosts() as h:
+        for host in (h.a, h.b):
+            firewall(host, rtps_ports(domain, user=False) + FLOW_PORTS)
+        start_node(h, host_env(domain, tmp_path / "u"), tmp_path / "u")
+        no_user = ask(h, host_env(domain, tmp_path / "u"), 10)
+        dropped_user = h.a.counters("fdfw")
+    assert wrong.returncode == 1 and "no torque_node" in wrong.stderr, wrong
+    assert dropped_wrong[0] > 0, dropped_wrong
+    assert no_user.returncode == 1 and "did not answer" in no_user.stderr, no_user
+    assert dropped_user[0] > 0, dropped_user
