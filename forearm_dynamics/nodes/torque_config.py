@@ -113,10 +113,11 @@ OUTPUT_SPECS = (
          "for this long (never extrapolate further)", "s", 0.001, 3600.0),
     Spec("publish_std", False, "publish std_topic: for every output, the same header and names with "
          "effort = one standard deviation of each torque (N*m; estimation, lag and model parts, "
-         "and the subject part with subject_std ansur, stated in ~/config; docs/uncertainty.md). "
-         "Needs an estimator with a covariance (kalman) and output_rate_hz 0; otherwise nothing is "
-         "published there and ~/config says why. Off by default: a second message per sample "
-         "costs more than the budget at 1 kHz (benchmarks/uncertainty_cost.py)"),
+         "and the subject part with subject_std ansur, stated in ~/config; docs/uncertainty.md); "
+         "with output_rate_hz > 0 that of each extrapolated output, its growth over the horizon "
+         "included. Needs an estimator with a covariance (kalman); otherwise nothing is published "
+         "there and ~/config says why. Off by default: a second message per sample costs more "
+         "than the budget at 1 kHz (benchmarks/uncertainty_cost.py)"),
     Spec("std_topic", "joint_torques_std", "JointState topic of the torques' standard deviations "
          "(remappable too)"),
 )

@@ -129,14 +129,9 @@ class TorqueNode(JointStreamNode):
         self.output_rate_hz = out.output_rate_hz
         self.input_timeout_ns = round(out.input_timeout * 1e9)
         self._std_topic = None
-        self._std_off_why = "publish_std is false"
         if out.publish_std:
-            if self.output_rate_hz > 0:
-                self._std_off_why = ("output_rate_hz > 0: the σ of a prediction between samples is "
-                                     "not computed, nothing is published on std_topic")
-            else:
-                self._std_topic = params.topic("std_topic")
-                params.distinct_topics(("input_topic", "output_topic", "std_topic"), RESERVED_TOPICS)
+            self._std_topic = params.topic("std_topic")
+            params.distinct_topics(("input_topic", "output_topic", "std_topic"), RESERVED_TOPICS)
         request = ModelRequest.from_values(params.values(LIVE))
         try:
             bundle = build_bundle(request, 1, 20, std=self._std_topic)
@@ -144,8 +139,9 @@ class TorqueNode(JointStreamNode):
             raise ParameterError("model", str(exc)) from None
         if bundle.arm.nv != bundle.estimator.n:
             bundle = build_bundle(request, 1, bundle.arm.nv, std=self._std_topic)
-        self._std_ready = False  # the last output has a σ to publish
-        self._std_known = False  # ... and it is known (else inf: warming up)
+        self._std_ready = False  # the last output has a σ to publish (after it: after_output)
+        self._std_stamp = 0  # ... the stamp of the estimate it is the σ of
+        self._std_warm = False  # ... the estimate is warm (else σ = inf)
         std = self._std_topic
 
         def make(request: ModelRequest, config_id: int, n: int, previous: ModelBundle) -> ModelBundle:
@@ -187,6 +183,9 @@ class TorqueNode(JointStreamNode):
         if self.output_rate_hz > 0:  # the timer publishes (est.predict keeps this estimate)
             # only once the estimator is warm: a timer fed by one sample would repeat it
             self._have_state = warm and est.stamp_ns is not None
+            self._std_ready = ts is not None
+            if ts is not None and est.stamp_ns is not None:  # the jerk and covariance it predicts from
+                ts.observe(est.stamp_ns, velocity_given)
             self._state_t_ns = t_ns
             self._last_in_ns = _time_ns()
             return None
@@ -200,28 +199,32 @@ class TorqueNode(JointStreamNode):
         # computed from it and the output message states it ("position and velocity as used")
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
-        if ts is not None:  # computeRNEADerivatives gives τ too: no separate RNEA
-            known = ts.update(est.stamp_ns, velocity_given)
-            tau = ts.tau if known else pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
-            self._std_ready = True
-            self._std_known = known and warm
-        else:
-            self._std_ready = False
-            tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh
+            if ts is not None:
+                ts.reset()
+            self._std_ready = False
             raise v.Rejection(v.NON_FINITE_TORQUE, "torque overflowed (absurd inputs?)")
         np.copyto(self.effort, tau)
+        # the σ is computed after the torques are published (after_output): they never wait for it
+        self._std_ready = ts is not None
+        self._std_stamp, self._std_warm = est.stamp_ns, warm
         return warm
 
     def after_output(self, sec: int, nanosec: int) -> None:
         """After each output: joint_torques_std for it (same header and names; σ = inf while
-        the estimate warms up: its error is not what the covariance says), and the first
-        output of a new config states that config, applied from this output's stamp."""
+        the estimate warms up: its error is not what the covariance says), computed here,
+        after the torques went out; and the first output of a new config states that
+        config, applied from this output's stamp."""
         if self._std_ready:
+            ts = self.live.in_use.std
+            if self.output_rate_hz > 0:  # the σ of the prediction to the output's stamp
+                known = ts.predict(sec * 1_000_000_000 + nanosec)
+            else:
+                known = ts.update(self._std_stamp, self._velocity_given) and self._std_warm
             t = self._std_templates.get(self.out.frame_id)
-            std = self.live.in_use.std.std if self._std_known else self._std_unknown
-            self.std_pub.publish(t.fill(sec, nanosec, std))
+            self.std_pub.publish(t.fill(sec, nanosec, ts.std if known else self._std_unknown))
         if self.live.announcing:
             b = self.live.first_output()
             if b is not None:  # the worker thread publishes it: no JSON work here
@@ -364,7 +367,7 @@ class TorqueNode(JointStreamNode):
 
     def _std_config(self, b: ModelBundle) -> dict:
         if self._std_topic is None:
-            return {"published": False, "why": self._std_off_why}
+            return {"published": False, "why": "publish_std is false"}
         out = dict(b.std_config)
         if out.get("published") and hasattr(self, "std_pub"):
             out["topic"] = self.std_pub.topic_name  # as resolved (remapping included)

@@ -132,7 +132,6 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
             else:
                 std_config = {"published": True, **ts.parts()}
         q, qd, qdd = q.copy(), np.zeros_like(q), np.zeros_like(q)
-        tau_ts = np.empty_like(q) if ts is not None else None
         std_out = np.full_like(q, np.inf) if ts is not None else None
         last = None
         for k in range(len(t)):
@@ -144,12 +143,9 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
             vel = bool(has_v[k])
             warm = est.update(int(t[k]), q[k], stream.velocity[idx[k]] if vel else None)
             q[k], qd[k], qdd[k] = est.q, est.qd, est.qdd
-            if ts is not None:
-                known = ts.update(int(t[k]), vel)
-                tau_ts[k] = ts.tau if known else arm.inverse_dynamics(est.q, est.qd, est.qdd)
-                if known and warm:
-                    std_out[k] = ts.std
-    tau = arm.inverse_dynamics_batch(q, qd, qdd) if std_out is None else tau_ts
+            if ts is not None and ts.update(int(t[k]), vel) and warm:
+                std_out[k] = ts.std
+    tau = arm.inverse_dynamics_batch(q, qd, qdd)
     elapsed = time.perf_counter() - start
     return OfflineResult(t, stream.log_ns[idx], [stream.frame_ids[i] for i in idx], q, qd, qdd, tau,
                          dropped, len(segments(t, gap)), warnings, elapsed, std_out, std_config)

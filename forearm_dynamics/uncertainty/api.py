@@ -74,10 +74,9 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
             ts.reset()
         warm[k] = est.update(int(t_ns[k]), q[k], qd[k] if vel else None)
         out["q"][k], out["qd"][k], out["qdd"][k] = est.q, est.qd, est.qdd
+        out["tau"][k] = arm.inverse_dynamics(est.q, est.qd, est.qdd)  # the node's pin.rnea
         if ts.update(int(t_ns[k]), vel):
-            out["tau"][k], out["std"][k] = ts.tau, ts.std
+            out["std"][k] = ts.std
             out["var_est"][k], out["var_lag"][k] = ts.prop.var_est, ts.prop.var_lag
             out["var_subject"][k] = ts.prop.var_subject
-        else:
-            out["tau"][k] = arm.inverse_dynamics(est.q, est.qd, est.qdd)
     return TorquesWithStd(t_ns=t_ns, warm=warm, var_model=ts.model_var.copy(), parts=ts.parts(), **out)

@@ -1,11 +1,12 @@
 """One σ per torque, per sample: the estimation, lag, model (and subject) parts put together.
 
-`TorqueStd` is what torque_node and the offline API both run after each estimator update:
-computeRNEADerivatives at the estimate (it returns τ as well, so the caller publishes
-`tau` and runs no separate RNEA), the estimator's covariance (state_source: the one
+`TorqueStd` is what torque_node and the offline API both run after each estimator update
+(the torques themselves are pin.rnea's, computed and published first): the derivatives
+(∂τ/∂q, ∂τ/∂q̇, M) at the estimate, the estimator's covariance (state_source: the one
 adapter), the jerk's recent RMS (lag.JerkTracker) and the per-DOF model term
-(model_term). `parts()` says what the σ contains, for the node's config message and the
-bag's metadata.
+(model_term). `predict(t_ns)` gives the σ of the estimator's extrapolation to another
+stamp (torque_node's output_rate_hz > 0). `parts()` says what the σ contains, for the
+node's config message and the bag's metadata.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 
 from .lag import JERK_TAU_S, LAG_GAIN, JerkTracker
 from .model_term import model_variance
-from .propagation import Propagator
+from .propagation import Propagator, extrapolated
 from .state_source import state_source
 from .subject import subject_spread
 
@@ -52,31 +53,55 @@ class TorqueStd:
         self.subject = subject_spread(arm, subject, subject_measured)
         self.jerk = JerkTracker(arm.nv, tau_s)
         self.gain, self.tau_s = float(gain), float(tau_s)
-        self.tau = self.prop.tau
         self.std = self.prop.std
         self._lin_cov: tuple | None = None  # the covariance object of the last linearisation
         self._lin_t = 0.0
+        self._jerk_ms = self.jerk.ms_jerk  # the mean-square jerk after the last sample
 
     def reset(self) -> None:
         self.jerk.reset()
         self._lin_cov = None
 
+    def observe(self, t_ns: int, velocity_given: bool) -> None:
+        """After est.update(t_ns, ...): the covariance source and the jerk take the sample
+        (what update() does before propagating; alone when only predictions are output)."""
+        src = self.src
+        src.refresh(t_ns * 1e-9, velocity_given)
+        self._jerk_ms = self.jerk.update(t_ns, self.est.qdd, src.baseline, src.delta_noise_var)
+
     def update(self, t_ns: int, velocity_given: bool) -> bool:
-        """After est.update(t_ns, ...): τ into self.tau, σ into self.std; False (both
-        untouched) while the estimator has no covariance yet (its first sample)."""
+        """After est.update(t_ns, ...): σ into self.std; False (untouched) while the
+        estimator has no covariance yet (its first sample)."""
         est, src = self.est, self.src
-        t_s = t_ns * 1e-9
-        src.refresh(t_s, velocity_given)
-        jerk = self.jerk.update(t_ns, est.qdd, src.baseline, src.delta_noise_var)
+        self.observe(t_ns, velocity_given)
         cov = src.cov()
         if cov is None:
             return False
+        t_s = t_ns * 1e-9
         lin = cov is not self._lin_cov or not 0.0 <= t_s - self._lin_t < RELINEARISE_S
         if lin:
             self._lin_cov, self._lin_t = cov, t_s
             if self.subject is not None:  # at the same cadence as the estimation part
                 self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
-        self.prop(est.q, est.qd, est.qdd, cov, src.lag if self.use_lag else None, jerk, lin)
+        self.prop(est.q, est.qd, est.qdd, cov, src.lag if self.use_lag else None, self._jerk_ms, lin)
+        return True
+
+    def predict(self, t_ns: int) -> bool:
+        """After est.predict(t_ns): σ of the extrapolated estimate into self.std (False while
+        there is no covariance): the covariance and the lag moved over the horizon h =
+        t_ns - est.stamp_ns (propagation.extrapolated), linearised at the extrapolated state
+        on every call (the subject part too), so the result depends on the last update and
+        t_ns only (not on earlier predictions)."""
+        est, src = self.est, self.src
+        cov = src.cov()
+        if cov is None or est.stamp_ns is None:
+            return False
+        h = max((t_ns - est.stamp_ns) * 1e-9, 0.0)  # as est.predict extrapolates
+        cov_h, lag = extrapolated(cov, src.lag if self.use_lag else None, h)
+        if self.subject is not None:
+            self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
+        self.prop(est.q, est.qd, est.qdd, cov_h, lag, self._jerk_ms, True)
+        self._lin_cov = None  # the next update() linearises at its own state
         return True
 
     def parts(self) -> dict:
@@ -90,6 +115,10 @@ class TorqueStd:
                     f"mean square over {self.tau_s:g} s), through the same "
                     "derivatives (uncertainty/lag.py)") if self.use_lag else "off",
             "linearised_every_s": RELINEARISE_S,
+            "prediction": "an output extrapolated h ahead of the estimate (output_rate_hz > 0): "
+                          "covariance F(h) Σ F(h)ᵀ and lag per unit jerk F(h) e - (h³/6, h²/2, h), "
+                          "F the constant-acceleration transition, linearised at the extrapolated "
+                          "state (uncertainty/propagation.py extrapolated)",
             "model": (f"model simplification, per DOF constant: {self.model_source}"
                       if self.use_model else "off"),
             "model_std_nm": dict(zip(self.arm.joint_names, np.sqrt(self.model_var).round(6).tolist(),
