@@ -1,6 +1,7 @@
 """Two hosts on networks that are not a plain multicast LAN (hostkit.py; docs/two-hosts.md
 "Running it"): without multicast, SUBNET discovery finds nothing, ROS_STATIC_PEERS or a Fast
-DDS discovery server (the wheels' `fastdds discovery`) make the torques cross; behind a
+DDS discovery server (the wheels' `fastdds discovery`) make the torques cross
+(SYSTEM_DEFAULT with static peers does not); behind a
 firewall that lets only the RTPS ports of the domain through, the torques cross and B sees
 A's node, and with the ports of another domain, or without the user-data ports, nothing
 crosses. The discovery-server run is the whole lab pipeline (torque_node in A; publisher
@@ -39,7 +40,8 @@ def host_env(domain: int, log_dir: Path, **extra: str) -> dict[str, str]:
     """ROS environment inside a namespace: SUBNET discovery, UDP only (shared memory would
     carry the data past the veth between two namespaces of one machine)."""
     env = rosproc.processes.ros_env(domain, log_dir)
-    env.update(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", FASTDDS_BUILTIN_TRANSPORTS="UDPv4", **extra)
+    env.update(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
+    env.update(extra)
     return env
 
 
@@ -95,16 +97,24 @@ def node_names(h: hostkit.TwoHosts, env: dict[str, str], timeout_s: float) -> st
                    timeout=timeout_s + 120).stdout.strip()
 
 
-def test_without_multicast_subnet_discovery_finds_nothing(tmp_path):
-    """The harness really has no multicast: both hosts announce (the drop counters count
-    it) and nobody hears; SUBNET discovery is multicast only, so the client never matches."""
+@pytest.mark.parametrize("discovery", ["SUBNET", "SYSTEM_DEFAULT"])
+def test_without_multicast_automatic_discovery_finds_nothing(tmp_path, discovery):
+    """The harness really has no multicast: A announces (the drop counter counts it) and
+    nobody hears; SUBNET discovery is multicast only, so the client never matches. With
+    SYSTEM_DEFAULT, rmw_fastrtps ignores ROS_STATIC_PEERS (it adds them for LOCALHOST and
+    SUBNET only): nothing either, though both hosts name the other."""
     domain = rosproc.test_domain(102, 139)
+    peers = discovery == "SYSTEM_DEFAULT"
+    env_a = host_env(domain, tmp_path, ROS_AUTOMATIC_DISCOVERY_RANGE=discovery,
+                     **({"ROS_STATIC_PEERS": hostkit.ADDR_B} if peers else {}))
+    env_b = host_env(domain, tmp_path, ROS_AUTOMATIC_DISCOVERY_RANGE=discovery,
+                     **({"ROS_STATIC_PEERS": hostkit.ADDR_A} if peers else {}))
     with hostkit.TwoHosts(multicast=False) as h:
-        start_node(h, host_env(domain, tmp_path), tmp_path)
-        r = ask(h, host_env(domain, tmp_path), 10)
-        dropped = (h.a.multicast_dropped(), h.b.multicast_dropped())
+        start_node(h, env_a, tmp_path)
+        r = ask(h, env_b, 10)
+        dropped = h.a.multicast_dropped()
     assert r.returncode == 1 and "no torque_node" in r.stderr, r
-    assert min(dropped) > 0, dropped
+    assert dropped > 0, dropped
 
 
 def test_static_peers_cross_without_multicast(tmp_path):
@@ -198,24 +208,29 @@ def test_firewall_with_only_the_rtps_ports_lets_the_torques_through(tmp_path):
     assert dropped == ([0], [0]), dropped
 
 
-def test_firewall_for_another_domain_or_without_user_ports_stops_them(tmp_path):
+def test_firewall_missing_ports_stop_what_they_carry(tmp_path):
     """The same firewall computed for another domain: no discovery at all; with the
-    discovery ports only (no user unicast): the endpoints match but no torque arrives."""
+    discovery ports only (no user unicast): the endpoints match but no torque arrives;
+    without the unique-flow ports: the torques cross but B does not see A's node name."""
     domain, other = rosproc.test_domain(102, 139), rosproc.test_domain(102, 139)
     assert domain != other
-    with hostkit.TwoHosts() as h:
-        for host in (h.a, h.b):
-            firewall(host, rtps_ports(other) + FLOW_PORTS)
-        start_node(h, host_env(domain, tmp_path / "d"), tmp_path / "d")
-        wrong = ask(h, host_env(domain, tmp_path / "d"), 10)
-        dropped_wrong = h.a.counters("fdfw")
-    with hostkit.TwoHosts() as h:
-        for host in (h.a, h.b):
-            firewall(host, rtps_ports(domain, user=False) + FLOW_PORTS)
-        start_node(h, host_env(domain, tmp_path / "u"), tmp_path / "u")
-        no_user = ask(h, host_env(domain, tmp_path / "u"), 10)
-        dropped_user = h.a.counters("fdfw")
-    assert wrong.returncode == 1 and "no torque_node" in wrong.stderr, wrong
-    assert dropped_wrong[0] > 0, dropped_wrong
-    assert no_user.returncode == 1 and "did not answer" in no_user.stderr, no_user
-    assert dropped_user[0] > 0, dropped_user
+    cases = {"wrong": rtps_ports(other) + FLOW_PORTS,
+             "no_user": rtps_ports(domain, user=False) + FLOW_PORTS,
+             "no_flows": rtps_ports(domain)}
+    got = {}
+    for name, ports in cases.items():
+        tmp = tmp_path / name
+        with hostkit.TwoHosts() as h:
+            for host in (h.a, h.b):
+                firewall(host, ports)
+            start_node(h, host_env(domain, tmp), tmp)
+            r = ask(h, host_env(domain, tmp), 10 if name != "no_flows" else 60)
+            names = node_names(h, host_env(domain, tmp), 8) if name == "no_flows" else ""
+            got[name] = (r, names, h.a.counters("fdfw")[0])
+    r, _, dropped = got["wrong"]
+    assert r.returncode == 1 and "no torque_node" in r.stderr and dropped > 0, got["wrong"]
+    r, _, dropped = got["no_user"]
+    assert r.returncode == 1 and "did not answer" in r.stderr and dropped > 0, got["no_user"]
+    r, names, dropped = got["no_flows"]
+    assert r.returncode == 0 and "elbow_flexion" in r.stdout, r
+    assert "probe" in names and "torque_node" not in names and dropped > 0, got["no_flows"]
