@@ -16,6 +16,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import hostkit
@@ -73,8 +74,16 @@ def firewall(host: hostkit.Host, ports: list[int]) -> None:
              "  }\n}\n")
 
 
-def start_node(h: hostkit.TwoHosts, env: dict[str, str], tmp: Path):
-    return h.a.start([str(BIN / "torque_node")], env, tmp / "a_node.log")
+def start_node(h: hostkit.TwoHosts, env: dict[str, str], tmp: Path, hang_s: float = 180.0):
+    """torque_node in host A, returned once it subscribes (its first log line), so that the
+    short waits of the cases that expect nothing time discovery, not a loaded start-up."""
+    log = tmp / "a_node.log"
+    node = h.a.start([str(BIN / "torque_node")], env, log)
+    deadline = time.monotonic() + hang_s
+    while "/joint_states -> /joint_torques" not in log.read_text(errors="replace"):
+        assert node.poll() is None and time.monotonic() < deadline, log.read_text()[-2000:]
+        time.sleep(0.1)
+    return node
 
 
 def ask(h: hostkit.TwoHosts, env: dict[str, str], timeout_s: float) -> subprocess.CompletedProcess:
@@ -224,7 +233,7 @@ def test_firewall_missing_ports_stop_what_they_carry(tmp_path):
             for host in (h.a, h.b):
                 firewall(host, ports)
             start_node(h, host_env(domain, tmp), tmp)
-            r = ask(h, host_env(domain, tmp), 10 if name != "no_flows" else 60)
+            r = ask(h, host_env(domain, tmp), {"wrong": 10, "no_user": 20}.get(name, 60))
             names = node_names(h, host_env(domain, tmp), 8) if name == "no_flows" else ""
             got[name] = (r, names, h.a.counters("fdfw")[0])
     r, _, dropped = got["wrong"]
