@@ -58,7 +58,7 @@ VARIANTS = {"calibrated": {}, "no_lag": {"lag": False},
 
 
 def stream(arm, truth: Truth, noise_deg: float, vel_dps: float | None, seed: int, every: int,
-           **kw) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           offset: int = 0, **kw) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(error, σ, σ_est², σ_lag²) over the scored samples of every `every`-th movement."""
     rng = np.random.default_rng(seed)
     errs, stds, ve, vl = [], [], [], []
@@ -67,7 +67,7 @@ def stream(arm, truth: Truth, noise_deg: float, vel_dps: float | None, seed: int
         zv = None
         if vel_dps is not None:
             zv = qd + rng.normal(0.0, math.radians(vel_dps), qd.shape) if vel_dps else qd
-        if k % every:
+        if (k - offset) % every:
             continue
         out = inverse_dynamics_with_std(arm, stamps, zq, zv, model=False, t_in_ns=True, **kw)
         tau = truth.tau[k]
@@ -78,7 +78,7 @@ def stream(arm, truth: Truth, noise_deg: float, vel_dps: float | None, seed: int
     return tuple(np.concatenate(x) for x in (errs, stds, ve, vl))
 
 
-def zoo_stream(arm, sensor, every: int, seed: int, **kw):
+def zoo_stream(arm, sensor, every: int, seed: int, offset: int = 0, **kw):
     """(error, σ, σ_est², σ_lag²) of benchmarks/sensors.py's sensor over every `every`-th
     movement: each after 0.5 s held, its own stream (a fresh estimator per movement: the API
     call), joints the sensor does not measure held (their truth too), gaps dropped."""
@@ -88,7 +88,7 @@ def zoo_stream(arm, sensor, every: int, seed: int, **kw):
     rng = np.random.default_rng(seed)
     rate = sensor.rate_hz
     errs, stds, ve, vl = [], [], [], []
-    for mv in movement_library()[::every]:
+    for mv in movement_library()[offset::every]:
         ev = sensors.held_movement(mv, sensor.measured)
         t = np.concatenate([np.arange(-round(0.5 * rate), 0) / rate, mv.sample_times(rate)])
         q, qd, qdd = ev(t)
@@ -195,6 +195,8 @@ def table(section: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--every", type=int, default=1, help="score every N-th movement (tuning: 4)")
+    ap.add_argument("--offset", type=int, default=0,
+                    help="start at this movement (with --every 8: 0 = the tuning set, 4 = held out)")
     ap.add_argument("--gain", type=float, default=None, help="lag gain (default: lag.LAG_GAIN)")
     ap.add_argument("--tau", type=float, default=None,
                     help="jerk RMS time constant s (default: lag.JERK_TAU_S)")
@@ -228,7 +230,7 @@ def main(argv=None) -> int:
             kw = dict(VARIANTS[variant])
             if variant == "calibrated":
                 kw.update({k: v for k, v in (("gain", args.gain), ("tau_s", args.tau)) if v is not None})
-            err, std, ve, vl = stream(arm, truth, noise, vel, SEED + i, args.every, **kw)
+            err, std, ve, vl = stream(arm, truth, noise, vel, SEED + i, args.every, args.offset, **kw)
             groups = score(err, std, ve, vl)
             rows.append({"row": label, "rate_hz": rate, "noise_deg": noise, "velocity_noise_dps": vel,
                          "variant": variant, "groups": groups, "met": met(groups),
@@ -242,7 +244,9 @@ def main(argv=None) -> int:
                 continue
             for variant in args.variants.split(","):
                 kw = dict(VARIANTS[variant])
-                err, std, ve, vl = zoo_stream(arm, sensor, args.every, SEED + 100 + i, **kw)
+                kw.update({k: v for k, v in (("gain", args.gain), ("tau_s", args.tau))
+                           if v is not None and variant == "calibrated"})
+                err, std, ve, vl = zoo_stream(arm, sensor, args.every, SEED + 100 + i, args.offset, **kw)
                 groups = score(err, std, ve, vl)
                 rows.append({"row": f"zoo:{sensor.name}", "rate_hz": sensor.rate_hz,
                              "sensor": sensor.name, "source": sensor.source, "variant": variant,
@@ -250,7 +254,8 @@ def main(argv=None) -> int:
                 print(line(sensor.name, variant, groups), flush=True)
     info["loadavg_end"] = list(os.getloadavg())
     cal = [r for r in rows if r["variant"] == "calibrated"]
-    command = "python benchmarks/uncertainty.py" + (f" --every {args.every}" if args.every > 1 else "")
+    command = ("python benchmarks/uncertainty.py" + (f" --every {args.every}" if args.every > 1 else "")
+               + (f" --offset {args.offset}" if args.offset else ""))
     section = {"command": command,
                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": info,
                "targets": {"coverage": COVERAGE, "ratio": RATIO,

@@ -121,8 +121,8 @@ def test_bag_sigma_is_the_offline_apis(bags) -> None:
     sd = np.array([got["std"][int(s)].effort for s in stamps])
     tq = np.array([got["torques"][int(s)].effort for s in stamps])
     np.testing.assert_allclose(tq, api.tau, rtol=0, atol=1e-9)
-    assert np.array_equal(np.isinf(sd).all(axis=1), ~api.warm) and (~api.warm).sum() >= 2  # 2 starts
-    np.testing.assert_allclose(sd[api.warm], api.std[api.warm], rtol=1e-12)
+    assert np.array_equal(np.isinf(sd).all(axis=1), ~api.known) and (~api.known).sum() >= 2  # 2 starts
+    np.testing.assert_allclose(sd[api.known], api.std[api.known], rtol=1e-12)
 
 
 def test_bag_export_adds_the_sigma_columns(bags, tmp_path) -> None:

@@ -118,16 +118,17 @@ def test_one_std_message_per_torque_message_same_header_and_names(run) -> None:
 
 def test_node_sigma_is_the_offline_apis(run) -> None:
     """Same samples -> the same τ and σ as inverse_dynamics_with_std (the node's values
-    travel as float64: equal to rounding); inf exactly where the estimate is warming up."""
+    travel as float64: equal to rounding); inf exactly where the σ is not known yet (the
+    estimate warming up, the noise not measured yet: the API's `known`)."""
     r, (stamps, z, *_rest) = run
     off = inverse_dynamics_with_std(build_model(), stamps, z, t_in_ns=True)
     tau = np.array([r.torques[int(s)].effort for s in stamps])
     std = np.array([r.stds[int(s)].effort for s in stamps])
     np.testing.assert_allclose(tau, off.tau, rtol=1e-12, atol=1e-12)
     unknown = ~np.isfinite(std)
-    assert np.array_equal(unknown.any(axis=1), ~off.warm), "inf σ exactly on the warm-up samples"
-    assert unknown[~off.warm].all()
-    np.testing.assert_allclose(std[off.warm], off.std[off.warm], rtol=1e-12, atol=1e-15)
+    assert np.array_equal(unknown.any(axis=1), ~off.known), "inf σ exactly where it is not known"
+    assert unknown[~off.known].all() and not (off.known & ~off.warm).any()
+    np.testing.assert_allclose(std[off.known], off.std[off.known], rtol=1e-12, atol=1e-15)
 
 
 def test_band_covers_the_error_and_the_uncalibrated_one_would_not(run) -> None:

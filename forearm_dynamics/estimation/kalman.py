@@ -193,6 +193,7 @@ class KalmanCA(StateEstimator):
         self._vel: bool | None = None
         self._vel_seat: bool | None = None
         self._armed = self._fixed_r is not None
+        self._applied = [False, False]  # a measured (position, velocity) noise is in use
         self._dt = 1e-3
         self._smoother: FixedLagSmoother | None = None
         self._smooth_dt = 0.0
@@ -256,6 +257,26 @@ class KalmanCA(StateEstimator):
         if self._fixed_rv is None and ne.velocity_ready:
             rv2 = ne.velocity(np.zeros(self.n)) ** 2
         return r2, rv2
+
+    def noise_known(self, velocity_given: bool) -> bool:
+        """Whether the noise the filter runs with is measured (or fixed), not the default
+        belief it starts with: the estimate needs ~0.3-0.5 s of samples (noise.py) and is
+        applied at the next noise update (every NOISE_EVERY_S), longer than the state's
+        warm-up; until then the gain, hence the error, is that of a guess."""
+        known = self._fixed_r is not None or self._applied[0]
+        if velocity_given:
+            known = known and (self._fixed_rv is not None or self._applied[1])
+        return known
+
+    def noiseless(self) -> np.ndarray:
+        """(n,) bool: joints whose white level (third differences of consecutive samples,
+        near Nyquist, where no movement is) is within 2 x the floor: exact or held input,
+        the jump gate's rule for exact input; their 10 Hz level is the movement's own
+        content, not noise. None with the noise fixed (kalman_noise_deg > 0) or before the
+        first white-level estimate."""
+        if self._fixed_r is not None or not self.noise_estimator.white_evaluations:
+            return np.zeros(self.n, bool)
+        return self.noise_estimator.white(np.empty(self.n)) <= 2.0 * self._floor
 
     def covariance(self) -> np.ndarray:
         """Posterior covariance of (q, qd, qdd) per joint, (n, 3, 3), of the estimate in
@@ -513,6 +534,7 @@ class KalmanCA(StateEstimator):
                 np.minimum(np.where(self._r > white, cap, np.inf), self._r, out=self._r)
                 np.maximum(self._r, self._floor, out=self._r)
             self._armed = moved = True
+            self._applied[0] = True
         elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
             # no 10 Hz estimate yet (a stream whose timer stalls restarts it at every stall and
             # may never get one): the gate judges with the white level, measured in a few
@@ -526,6 +548,7 @@ class KalmanCA(StateEstimator):
             ne.velocity(self._rv)
             np.maximum(self._rv, self._floor, out=self._rv)
             moved = True
+            self._applied[1] = True
         if moved:
             self._regroup(vel, dt)
 

@@ -26,12 +26,14 @@ class TorquesWithStd:
     qd: np.ndarray
     qdd: np.ndarray
     tau: np.ndarray  # (N, n) N·m
-    std: np.ndarray  # (N, n) N·m, 1σ; NaN where not known (the first sample)
+    std: np.ndarray  # (N, n) N·m, 1σ; NaN where not known (see `known`)
     var_est: np.ndarray  # (N, n) the parts, N·m²
     var_lag: np.ndarray
     var_model: np.ndarray  # (n,)
     var_subject: np.ndarray  # (N, n); 0 with subject "none"
-    warm: np.ndarray  # (N,) bool
+    warm: np.ndarray  # (N,) bool: the estimator's state is warm
+    known: np.ndarray  # (N,) bool: σ known (warm, and the noise measured): where torque_node
+    # and bag_torques publish a finite σ (inf elsewhere)
     parts: dict
 
 
@@ -66,6 +68,7 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
     out = {k: np.full((N, n), np.nan) for k in ("q", "qd", "qdd", "tau", "std", "var_est", "var_lag",
                                               "var_subject")}
     warm = np.zeros(N, bool)
+    known = np.zeros(N, bool)
     vel = qd is not None
     gap = round(max_gap_s * 1e9)
     for k in range(N):
@@ -76,7 +79,10 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
         out["q"][k], out["qd"][k], out["qdd"][k] = est.q, est.qd, est.qdd
         out["tau"][k] = arm.inverse_dynamics(est.q, est.qd, est.qdd)  # the node's pin.rnea
         if ts.update(int(t_ns[k]), vel):
-            out["std"][k] = ts.std
-            out["var_est"][k], out["var_lag"][k] = ts.prop.var_est, ts.prop.var_lag
-            out["var_subject"][k] = ts.prop.var_subject
-    return TorquesWithStd(t_ns=t_ns, warm=warm, var_model=ts.model_var.copy(), parts=ts.parts(), **out)
+            if warm[k]:  # as the node: no σ while the state warms up
+                known[k] = True
+                out["std"][k] = ts.std
+                out["var_est"][k], out["var_lag"][k] = ts.prop.var_est, ts.prop.var_lag
+                out["var_subject"][k] = ts.prop.var_subject
+    return TorquesWithStd(t_ns=t_ns, warm=warm, known=known, var_model=ts.model_var.copy(),
+                          parts=ts.parts(), **out)

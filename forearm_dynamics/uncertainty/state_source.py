@@ -76,8 +76,11 @@ class StateSource:
     """Reads one Kalman estimator after each update(), through its public API
     (noise_groups(), measured_noise(), period_s): `cov()` the covariance in COV_KEYS order,
     a (6,) tuple when every joint has the same (one noise group, same measured noise), else
-    an (n, 6) array per joint; `lag` (3,) per unit jerk (of the noisiest group: the largest
-    lag), `baseline` and `delta_noise_var` (scalar or (n,)) for the jerk estimate."""
+    an (n, 6) array per joint, None until the filter runs with a measured noise (the first
+    ~0.5 s: the default belief it starts with, 0.5 deg, is no measurement: a 3 deg camera's
+    σ would be computed for a sixth of its noise); `lag` (3,) per unit jerk of the noisiest
+    group, `lag_scale2` (n,) each joint's own q̈ lag over that one's, squared; `baseline` and
+    `delta_noise_var` (scalar or (n,)) for the jerk estimate."""
 
     def __init__(self, est: KalmanCA, covariance: str = "noise"):
         if covariance not in ("noise", "posterior"):
@@ -85,8 +88,12 @@ class StateSource:
         self.est = est
         self.kind = covariance
         self.lag = np.zeros(3)
+        self.lag_scale2 = np.ones(est.n)
         self.delta_noise_var: float | np.ndarray = 0.0
         self.baseline = 1
+        self._known = False
+        self._settling = False
+        self._gains: np.ndarray | None = None
         self._noise: tuple[float, ...] | np.ndarray | None = None
         self._t = -math.inf
         self._dt: float | None = None
@@ -102,17 +109,30 @@ class StateSource:
         """Re-derive gains, lag, noise covariance if the mean period or the noise groups
         moved, or every 0.25 s of stream time (never per sample)."""
         est = self.est
+        if not self._known:  # once measured it stays measured (a reset keeps the noise)
+            self._known = est.noise_known(velocity_given)
         # the MEAN period (exponential, ~20 samples), against the one of the last refresh with
         # 5 % of hysteresis: a jittered stream's dt moves every sample, its settled gain hardly
         p = est.period_s
         self._dt = dt = p if self._dt is None else self._dt + 0.05 * (p - self._dt)
         key = (velocity_given, est.groups_version)
-        if (key == self._key and t_s - self._t < _REFRESH_S
+        if (key == self._key and not self._settling and t_s - self._t < _REFRESH_S
                 and abs(math.log(dt / self._dt_seat)) < _DT_MOVE):
             return
         groups = est.noise_groups()
         if not groups or dt <= 0.0:
             return
+        # a regrouped filter's gain is not settled yet (a new group starts from a scaled or
+        # steady-state P and converges over some samples): Σ and nv from the first step's
+        # gain were off by up to 4000x (a 1 kHz encoder's joint: nv 0.002 against 8.6
+        # (rad/s²)² once settled), held for 0.25 s; so re-derive every sample until two
+        # successive gains agree to 1e-3
+        gains = np.concatenate([g.gain.ravel() for g in groups])
+        last = self._gains
+        self._settling = key != self._key or (
+            self._settling and (last is None or last.shape != gains.shape
+                                or not np.allclose(gains, last, rtol=1e-3, atol=0.0)))
+        self._gains = gains
         self._dt_seat = dt
         worst = max(groups, key=lambda g: g.r)
         k = worst.gain
@@ -120,7 +140,25 @@ class StateSource:
             return
         self.lag = lag_per_jerk(k, dt, velocity_given)
         self.baseline = int(min(MAX_BASELINE, max(1, round(abs(self.lag[2]) / dt))))
+        # each joint lags by its own group's gain (a 0.1 deg elbow beside a 1 deg pro/sup, as
+        # mocap IK gives, lags less than the pro/sup): the torque's lag weights take the
+        # reference group's vector, so each joint's jerk is scaled by its q̈ lag over the
+        # reference's (`lag_scale2`, squared): exact for the M·e₂ term; the smaller ∂τ/∂q·e₀
+        # and ∂τ/∂q̇·e₁ terms are scaled alike (an approximation)
+        scale = np.ones(est.n)
+        if self.lag[2] != 0.0:
+            for g in groups:
+                scale[g.idx] = lag_per_jerk(g.gain, dt, velocity_given)[2] / self.lag[2]
+        np.multiply(scale, scale, out=self.lag_scale2)
         r2, rv2 = est.measured_noise()
+        # no noise where the samples show none: a joint whose white level (near Nyquist, no
+        # movement there) is at the floor is exact or held, its 10 Hz level is the movement's
+        # own content; a velocity noise measured below the floor is the exact velocities'
+        # second difference (0.001 deg/s at 1 kHz). Counted as noise, they made the exact
+        # input's σ 1.1-1.8x its error from this part alone (fingers)
+        r2 = np.where(est.noiseless(), 0.0, r2)
+        floor = math.radians(est.values["kalman_noise_floor_deg"])
+        rv2 = np.where(rv2 < floor * floor, 0.0, rv2)
         n = est.n
         cov = np.zeros((n, 6))
         dnv = np.zeros(n)
@@ -159,7 +197,7 @@ class StateSource:
             if np.ptp(c, axis=0).max() == 0.0:
                 return tuple(float(x) for x in c[0])
             return c
-        return self._noise
+        return self._noise if self._known else None
 
 
 def state_source(est, covariance: str = "noise") -> StateSource | None:

@@ -67,7 +67,8 @@ class TorqueStd:
         (what update() does before propagating; alone when only predictions are output)."""
         src = self.src
         src.refresh(t_ns * 1e-9, velocity_given)
-        self._jerk_ms = self.jerk.update(t_ns, self.est.qdd, src.baseline, src.delta_noise_var)
+        self._jerk_ms = self.jerk.update(t_ns, self.est.qdd, src.baseline, src.delta_noise_var,
+                                        src.lag_scale2)
 
     def update(self, t_ns: int, velocity_given: bool) -> bool:
         """After est.update(t_ns, ...): σ into self.std; False (untouched) while the
