@@ -171,7 +171,7 @@ def test_check_bag_asked_to_gate_a_bag_without_sigma_fails(bags, tmp_path) -> No
 
 def test_bag_torques_subject_std_adds_the_part(bags, tmp_path) -> None:
     """--subject-std ansur: the σ is the API's with subject="ansur" (wider than without on
-    every warm sample) and the bag's config states ANSUR II."""
+    every sample whose σ is known) and the bag's config states ANSUR II."""
     src, _out, written = bags
     out = tmp_path / "subject.mcap"
     r = run("bag_torques", src, out, "--subject-std", "ansur")
@@ -181,6 +181,6 @@ def test_bag_torques_subject_std_adds_the_part(bags, tmp_path) -> None:
     api = inverse_dynamics_with_std(build_model(), stamps, z, t_in_ns=True, subject="ansur")
     plain = inverse_dynamics_with_std(build_model(), stamps, z, t_in_ns=True)
     sd = np.array([got["std"][int(s)].effort for s in stamps])
-    np.testing.assert_allclose(sd[api.warm], api.std[api.warm], rtol=1e-12)
-    assert np.all(sd[api.warm] > plain.std[api.warm])
+    np.testing.assert_allclose(sd[api.known], api.std[api.known], rtol=1e-12)
+    assert np.all(sd[api.known] > plain.std[api.known])
     assert "ANSUR II male (n = 4082)" in got["config"]["std"]["subject_parameters"]

@@ -262,7 +262,8 @@ def test_api_adds_the_part_and_the_config_states_it(arm):
     """The σ with subject "ansur" is the σ without it plus the subject variance at each
     linearised state; the config statement names ANSUR II; off by default and said so."""
     mv = get_movement(4)
-    t = mv.sample_times(100.0)[:120]
+    # after 0.5 s held: the σ is known once the filter runs with a measured noise (~0.5 s)
+    t = np.concatenate([np.arange(-50, 0) / 100.0, mv.sample_times(100.0)[:120]])
     q = mv.evaluate(t)[0]
     rng = np.random.default_rng(14)
     qn = q + rng.normal(0.0, np.radians(0.5), q.shape)

@@ -78,11 +78,12 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
         warm[k] = est.update(int(t_ns[k]), q[k], qd[k] if vel else None)
         out["q"][k], out["qd"][k], out["qdd"][k] = est.q, est.qd, est.qdd
         out["tau"][k] = arm.inverse_dynamics(est.q, est.qd, est.qdd)  # the node's pin.rnea
-        if ts.update(int(t_ns[k]), vel):
-            if warm[k]:  # as the node: no σ while the state warms up
-                known[k] = True
-                out["std"][k] = ts.std
-                out["var_est"][k], out["var_lag"][k] = ts.prop.var_est, ts.prop.var_lag
-                out["var_subject"][k] = ts.prop.var_subject
+        # ts.update on every sample (it keeps the jerk read current); as the node, no σ while
+        # the state warms up
+        if ts.update(int(t_ns[k]), vel) and warm[k]:
+            known[k] = True
+            out["std"][k] = ts.std
+            out["var_est"][k], out["var_lag"][k] = ts.prop.var_est, ts.prop.var_lag
+            out["var_subject"][k] = ts.prop.var_subject
     return TorquesWithStd(t_ns=t_ns, warm=warm, known=known, var_model=ts.model_var.copy(),
                           parts=ts.parts(), **out)
