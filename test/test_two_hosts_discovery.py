@@ -183,9 +183,7 @@ def test_discovery_server_pipeline_without_multicast_checks_clean(tmp_path):
     domain = rosproc.test_domain(102, 139)
     ds = {"ROS_DISCOVERY_SERVER": f"{hostkit.ADDR_A}:{DS_PORT}"}
     with hostkit.TwoHosts(multicast=False) as h:
-        server_env = {**host_env(domain, tmp_path), "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
-        server = h.a.start(["fastdds", "discovery", "-i", "0", "-l", hostkit.ADDR_A, "-p",
-                            str(DS_PORT)], server_env, tmp_path / "a_server.log")
+        server = start_server(h, domain, tmp_path)
         res = _pipeline(h, tmp_path, host_env(domain, tmp_path, **ds), host_env(domain, tmp_path, **ds),
                         "[1, 2, 3, 6, 7, 8]")
         server_alive = server.poll() is None
@@ -198,6 +196,30 @@ def test_discovery_server_pipeline_without_multicast_checks_clean(tmp_path):
     assert delivery["joint_states"] > 0 and delivery["lost"] == 0, delivery
     assert res["code"] == 0 and res["report"]["exit_code"] == 0, res["out"][-3000:]
     assert res["report"]["failures"] == [], res["report"]["failures"]
+
+
+def start_server(h: hostkit.TwoHosts, domain: int, tmp: Path):
+    """`fastdds discovery` in host A as a user runs it: the venv's bin first on PATH."""
+    env = {**host_env(domain, tmp), "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
+    return h.a.start(["fastdds", "discovery", "-i", "0", "-l", hostkit.ADDR_A, "-p",
+                      str(DS_PORT)], env, tmp / "a_server.log")
+
+
+def test_discovery_server_behind_the_firewall(tmp_path):
+    """No multicast, a discovery server in A, and the firewall of the table: the server's
+    port on A, the domain's RTPS and unique-flow ports on both; the torques cross and no
+    UDP packet came in on another port."""
+    domain = rosproc.test_domain(102, 139)
+    ds = {"ROS_DISCOVERY_SERVER": f"{hostkit.ADDR_A}:{DS_PORT}"}
+    with hostkit.TwoHosts(multicast=False) as h:
+        firewall(h.a, rtps_ports(domain) + FLOW_PORTS + [DS_PORT])
+        firewall(h.b, rtps_ports(domain) + FLOW_PORTS)
+        start_server(h, domain, tmp_path)
+        start_node(h, host_env(domain, tmp_path, **ds), tmp_path)
+        r = ask(h, host_env(domain, tmp_path, **ds), 60)
+        dropped = (h.a.counters("fdfw"), h.b.counters("fdfw"))
+    assert r.returncode == 0 and "elbow_flexion" in r.stdout, r
+    assert dropped == ([0], [0]), dropped
 
 
 def test_firewall_with_only_the_rtps_ports_lets_the_torques_through(tmp_path):
