@@ -144,8 +144,11 @@ def test_fastdds_discovery_needs_the_venv_first_on_path(tmp_path):
     discovery-server test below starts it so); another python3 leaves the binary without
     libfastrtps. Docs: activate the venv first. Run inside host A (should it start after all,
     it listens only there)."""
+    other = tmp_path / "bin"  # python3 = the interpreter the venv was made from
+    other.mkdir()
+    (other / "python3").symlink_to(Path(sys.base_prefix) / "bin" / "python3")
     env = {**rosproc.processes.ros_env(rosproc.test_domain(102, 139), tmp_path),
-           "PATH": "/usr/bin:/bin"}
+           "PATH": f"{other}{os.pathsep}/usr/bin:/bin"}
     with hostkit.TwoHosts() as h:
         r = h.a.run([str(BIN / "fastdds"), "discovery", "-i", "0", "-l", hostkit.ADDR_A],
                     env=env, timeout=60)
