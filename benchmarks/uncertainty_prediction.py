@@ -6,7 +6,7 @@ TorqueStd, offline.
 
 Four library movements (3, 20, 37, 54) after a 0.5 s held lead, sampled at --rate with
 0.5 deg noise; after each warm sample, --outputs extrapolations spread over the interval to
-the next one (plus 0.3 ms, a loopback delivery). Each is scored against the noiseless
+the next one (plus 0.3 ms, a loopback delivery), where the σ is known. Each is scored against the noiseless
 truth at its stamp (model part left out: the truth is the same model): coverage of ±1.96σ
 and RMS(σ)/RMSE for the prediction σ (TorqueStd.predict), for the σ of the estimate it
 starts from (h = 0: no growth) and for the prediction σ without the lag part.
@@ -57,10 +57,15 @@ def run(rate: float, outputs: int) -> dict[str, tuple[float, float, int]]:
                 est.predict(s_ns)
                 truth = arm.inverse_dynamics(*(x[0] for x in mv.evaluate(np.array([t[k] + h]))))
                 err = np.abs(arm.inverse_dynamics(est.q, est.qd, est.qdd) - truth)
+                sds = {}
                 for name, tsx, at in (("prediction", ts, s_ns), ("prediction_no_lag", ts_nolag, s_ns),
                                       ("no_growth", ts, t_ns)):
-                    tsx.predict(at)
-                    res[name].append((err, np.sqrt(np.maximum(tsx.std**2 - ts.model_var, 0.0))))
+                    if not tsx.predict(at):  # σ not known yet (the noise not measured)
+                        break
+                    sds[name] = np.sqrt(np.maximum(tsx.std**2 - ts.model_var, 0.0))
+                else:
+                    for name, sd in sds.items():
+                        res[name].append((err, sd))
     out = {}
     for name, rows in res.items():
         e = np.array([r[0] for r in rows])
