@@ -7,17 +7,19 @@ overconfident exactly when the torque changes fastest (benchmarks/uncertainty.py
 "no_lag"). The jerk is not measured. One-sample differences of the q̈ estimate are useless
 for it (their noise, 500-1700 rad/s³ at 0.5 deg, is 10x the library's jerk); the change of
 the q̈ estimate over one q̈ lag d is what the bias itself is made of:
-    D = q̈(t) - q̈(t - m dt),  m dt ≈ d,   ĵ = D / (m dt),
-its mean square exponentially averaged (time constant JERK_TAU_S), less what the noise
-alone gives it (state_source.StateSource.delta_noise_var: nv = 2 (Σ₂₂ - (Aᵐ Σ)₂₂) for the
-noise covariance Σ and the filter's error dynamics A) with a margin, scaled by LAG_GAIN.
+    D = q̈(t_k) - q̈(t_(k-m)),  m dt ≈ d,   ĵ² = (D² - (1 + NOISE_MARGIN) nv) / T²,
+T = t_k - t_(k-m) the time D spans, nv what the noise alone gives D²
+(state_source.StateSource.delta_noise_var: nv = 2 (Σ₂₂ - (Aᵐ Σ)₂₂) for the noise covariance
+Σ and the filter's error dynamics A); ĵ² exponentially averaged (time constant JERK_TAU_S),
+its positive part, scaled by LAG_GAIN.
 
 The margin (NOISE_MARGIN): D's noise part has the mean square nv, but D is correlated over
 m samples (≈ the q̈ lag, 20-80 ms), about as long as the average, so its mean square
 fluctuates as nv·χ²₁ (standard deviation √2·nv); subtracting only nv and keeping the
 positive part read the fluctuation as jerk: on pure noise (no movement) the jerk read
-74-94 rad/s³ at 90-100 Hz (1.5 / 0.5 deg), more than the movements' own RMS jerk (41-68),
-and the glove's band (no lag part needed: its error is its noise) came out 1.3x too wide.
+74-94 rad/s³ at 90-100 Hz (1.5 / 0.5 deg, with a 30 ms average), more than the movements'
+own RMS jerk (41-68), and the glove's band (no lag part needed: its error is its noise) came
+out 1.3x too wide.
 So what is counted is the excess over nv·(1 + NOISE_MARGIN): a χ²₁ fluctuation exceeds
 2 nv half as often as nv (P = 0.16 against 0.32) and by about half as much on average
 (0.26 nv against 0.48 nv); a real jerk loses one nv, its own noise level.
@@ -41,13 +43,19 @@ MAX_BASELINE = 256  # samples of q̈ kept per joint (the baseline m is at most t
 
 
 class JerkTracker:
-    """Per joint mean square of the jerk ((rad/s³)²) seen as the change of q̈ over m samples."""
+    """Per joint mean square of the jerk ((rad/s³)²) seen as the change of q̈ over m samples.
+
+    Each sample's read is (D² - (1 + NOISE_MARGIN) nv) / T², T the time D spans (its own
+    stamps, not m x the last period: after a camera's 50-300 ms gap D spans the gap, and
+    m x the period made the jerk read up to 10x too big there, the band 2x the error for
+    0.3 s), exponentially averaged over tau_s; the result is its positive part."""
 
     def __init__(self, n: int, tau_s: float = JERK_TAU_S):
         self.tau_s = float(tau_s)
         self.ms_jerk = np.zeros(n)
-        self._ms = np.zeros(n)
+        self._ms = np.zeros(n)  # the average of the reads (signed), (rad/s³)²
         self._ring = np.zeros((MAX_BASELINE + 1, n))
+        self._stamps = np.zeros(MAX_BASELINE + 1, np.int64)
         self._tmp = np.zeros(n)
         self._count = 0
         self._t_ns: int | None = None
@@ -68,7 +76,9 @@ class JerkTracker:
         None: a per-joint factor on the result (state_source.lag_scale2: each joint's own lag
         over the reference one's, squared)."""
         ring, c = self._ring, self._count
-        np.copyto(ring[c % len(ring)], qdd)
+        size = len(ring)
+        np.copyto(ring[c % size], qdd)
+        self._stamps[c % size] = t_ns
         self._count = c + 1
         if self._t_ns is None or t_ns <= self._t_ns or c < m:
             if self._t_ns is None or t_ns <= self._t_ns:
@@ -76,17 +86,17 @@ class JerkTracker:
             return self.ms_jerk
         dt = (t_ns - self._t_ns) * 1e-9
         self._t_ns = t_ns
-        d = self._tmp
-        np.subtract(qdd, ring[(c - m) % len(ring)], out=d)
+        span = (t_ns - int(self._stamps[(c - m) % size])) * 1e-9
+        d, out = self._tmp, self.ms_jerk
+        np.subtract(qdd, ring[(c - m) % size], out=d)
         d *= d
+        np.multiply(noise_var, 1.0 + NOISE_MARGIN, out=out)
+        d -= out
+        d *= 1.0 / (span * span)
         d -= self._ms
         d *= min(1.0, dt / self.tau_s)
         self._ms += d
-        out = self.ms_jerk
-        np.multiply(noise_var, 1.0 + NOISE_MARGIN, out=d)
-        np.subtract(self._ms, d, out=out)
-        np.maximum(out, 0.0, out=out)
-        out *= 1.0 / (m * dt) ** 2
+        np.maximum(self._ms, 0.0, out=out)
         if scale2 is not None:
             out *= scale2
         return out
