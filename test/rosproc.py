@@ -67,6 +67,11 @@ def release_test_domains() -> None:
         _test_leases.pop().release()
 
 
+#: How long a test waits for a node it started to come up (discovered, subscribed, its
+#: config out). A hang guard, not a timing claim: the wait ends as soon as the node is
+#: there, and a node took 19 s to start at load 27 (a 20 s guard then fails a correct node).
+STARTUP_S = 180.0
+
 _LOG_DIR = Path(tempfile.mkdtemp(prefix="forearm_test_roslog_"))
 if not os.environ.get("KEEP_ROS_TEST_LOGS"):  # node output is read during the test itself
     atexit.register(shutil.rmtree, _LOG_DIR, ignore_errors=True)
@@ -111,8 +116,11 @@ class NodeProcess(Child):
             raise subprocess.TimeoutExpired(self.argv, timeout)
         return code
 
-    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
-        """Signal this process (only it), wait, escalate to SIGKILL if it hangs (and raise)."""
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 60.0) -> int:
+        """Signal this process (only it), wait, escalate to SIGKILL if it hangs (and raise).
+
+        60 s is a hang guard (the wait ends when the process does): a node took 19 s to
+        exit at load 27, and a SIGKILL after 10 s would fail a correct node."""
         return super().stop(sig, timeout, strict=True)
 
 

@@ -83,7 +83,7 @@ def _check_array(viewer: Viewer, array: MarkerArray, arm) -> None:
 
 def _set(peer, node: str, **params) -> object:
     client = peer.node.create_client(SetParameters, f"/{node}/set_parameters")
-    assert client.wait_for_service(timeout_sec=20)
+    assert client.wait_for_service(timeout_sec=rosproc.STARTUP_S)
     f = client.call_async(SetParameters.Request(
         parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in params.items()]))
     assert peer.spin_until(f.done, 20)
@@ -115,7 +115,8 @@ def test_markers_follow_the_torque_node_live():
     peer = rosproc.Peer("viz_test")
     try:
         viewer = Viewer(peer)
-        assert peer.spin_until(lambda: viewer.pub.get_subscription_count() > 0, 30), torque.output()
+        assert peer.spin_until(lambda: viewer.pub.get_subscription_count() > 0,
+                               rosproc.STARTUP_S), torque.output()
         p50 = build_model("segmented", 50)
         first = _last_model(viewer, p50)
         _check_array(viewer, first, p50)
@@ -166,7 +167,7 @@ def test_without_a_torque_node_its_own_model_is_drawn_and_follows_its_parameters
         pub = node.create_publisher(JointState, "joint_torques", stream_qos(100))
         arrays: list[MarkerArray] = []
         node.create_subscription(MarkerArray, "arm_markers", arrays.append, stream_qos(100))
-        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, 30), viz.output()
+        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), viz.output()
 
         def send(k: int) -> JointState:
             m = JointState(name=list(JOINT_NAMES)[::-1])  # any order: matched by name

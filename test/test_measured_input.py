@@ -54,7 +54,7 @@ def run():
     try:
         assert node.wait_for_output("config on", 30), node.output()
         # the node's answers are volatile: listen before the first one is sent
-        assert peer.spin_until(lambda: torques.get_publisher_count() > 0, 30), node.output()
+        assert peer.spin_until(lambda: torques.get_publisher_count() > 0, rosproc.STARTUP_S), node.output()
         pub = rosproc.start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}",
                             "-p", f"rate_hz:={RATE_HZ}", "-p", "noise_deg:=0.5",
                             "-p", "publish_velocity:=false", "-p", "seed:=11",

@@ -44,7 +44,7 @@ def test_every_node_yaml_lists_its_parameters() -> None:
 def _get(peer, node: str, names: list[str]) -> list:
     client = peer.node.create_client(GetParameters, f"{node}/get_parameters")
     try:
-        assert client.wait_for_service(timeout_sec=20), f"no {node}/get_parameters"
+        assert client.wait_for_service(timeout_sec=rosproc.STARTUP_S), f"no {node}/get_parameters"
         future = client.call_async(GetParameters.Request(names=names))
         assert peer.spin_until(future.done, 10)
         return future.result().values

@@ -47,7 +47,7 @@ def drive(node_args, n: int, rate: float = 100.0, names=TWO, wait_outputs: int |
     stamps = []
     try:
         assert node.wait_for_output("config on", 30), node.output()
-        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, 30), node.output()
+        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), node.output()
         peer.spin_for(0.5)
         t0 = time.time_ns()
         for k in range(n):
@@ -110,7 +110,7 @@ def test_fixed_rate_output_waits_for_a_warm_estimator() -> None:
     pub = peer.node.create_publisher(JointState, "joint_states", stream_qos(1000))
     try:
         assert node.wait_for_output("config on", 30), node.output()
-        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, 30), node.output()
+        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), node.output()
         peer.spin_for(0.5)
         t0 = time.time_ns()
         pub.publish(msg(JOINT_NAMES, [0.2] * 20, t0))

@@ -90,8 +90,9 @@ def _live_changes_during_a_1khz_replay() -> None:
         node.create_subscription(String, "/torque_node/config",
                                  lambda m: configs.append((time.time_ns(), json.loads(m.data))), latched)
         client = node.create_client(SetParametersAtomically, "/torque_node/set_parameters_atomically")
-        assert client.wait_for_service(timeout_sec=20), proc.output()
-        assert peer.spin_until(lambda: pub.get_subscription_count() > 0 and configs, 20), proc.output()
+        assert client.wait_for_service(timeout_sec=rosproc.STARTUP_S), proc.output()
+        assert peer.spin_until(lambda: pub.get_subscription_count() > 0 and configs,
+                               rosproc.STARTUP_S), proc.output()
 
         diags: list[tuple[int, dict]] = []  # the node's own latency per period
         node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: diags.extend(

@@ -59,7 +59,7 @@ def test_fixed_output_rate_from_a_100hz_input() -> None:
         node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: diags.extend(
             {kv.key: kv.value for kv in st.values} | {"_message": st.message} for st in m.status
             if st.name.startswith("torque_node")), 100)
-        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, 20), proc.output()
+        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), proc.output()
         peer.spin_for(0.5)
         assert not outs  # no input yet: nothing published
         msg = JointState()

@@ -68,7 +68,8 @@ class Run:
                                  lambda m: self.stds.setdefault(stamp_of(m), m), stream_qos(1000))
         node.create_subscription(String, "/torque_node/config",
                                  lambda m: self.config.append(json.loads(m.data)), latched_qos())
-        ok = self.peer.spin_until(lambda: self.pub.get_subscription_count() > 0 and self.config, 20)
+        ok = self.peer.spin_until(lambda: self.pub.get_subscription_count() > 0 and self.config,
+                                  rosproc.STARTUP_S)
         assert ok, self.proc.output()
 
     def send(self, stamps, q) -> None:

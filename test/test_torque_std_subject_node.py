@@ -78,8 +78,9 @@ def test_subject_part_through_the_node_and_its_live_switch() -> None:
         node.create_subscription(String, "/torque_node/config",
                                  lambda m: configs.append(json.loads(m.data)), latched_qos())
         client = node.create_client(SetParametersAtomically, "/torque_node/set_parameters_atomically")
-        assert client.wait_for_service(timeout_sec=20), proc.output()
-        assert peer.spin_until(lambda: pub.get_subscription_count() > 0 and configs, 20), proc.output()
+        assert client.wait_for_service(timeout_sec=rosproc.STARTUP_S), proc.output()
+        assert peer.spin_until(lambda: pub.get_subscription_count() > 0 and configs,
+                               rosproc.STARTUP_S), proc.output()
         assert "ANSUR II female (n = 1986)" in configs[-1]["std"]["subject_parameters"]
 
         msg = JointState()

@@ -71,7 +71,7 @@ def run():
     node.create_subscription(JointState, "joint_torques_std",
                              lambda m: stds.setdefault(stamp_of(m), m), stream_qos(1000))
     try:
-        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, 20), proc.output()
+        assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), proc.output()
         msg = JointState()
         msg.header.frame_id = "humerus"
         msg.name = list(JOINT_NAMES)
@@ -84,7 +84,7 @@ def run():
             msg.position = z[k].tolist()
             pub.publish(msg)
         peer.spin_for(0.6)  # the node stops input_timeout (0.2 s) after the last sample
-        assert peer.spin_until(lambda: set(stds) >= set(torques), 10), proc.output()[-2000:]
+        assert peer.spin_until(lambda: set(stds) >= set(torques), 60), proc.output()[-2000:]
         yield torques, stds, stamps, z, segs
     finally:
         peer.close()
