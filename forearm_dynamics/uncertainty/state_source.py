@@ -43,6 +43,9 @@ from .lag import MAX_BASELINE
 #: sample period or the noise belief moved: they change only with those
 _REFRESH_S = 0.25
 _DT_MOVE = math.log(1.05)
+#: after a regroup, re-derive on every sample for at most this many samples (the gain of a
+#: uniform 1 kHz stream settles to 1e-3 within 28-90)
+_SETTLE_MAX = 100
 _IDX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
@@ -93,6 +96,7 @@ class StateSource:
         self.baseline = 1
         self._known = False
         self._settling = False
+        self._settle_left = 0  # settling derivations left before it stops regardless
         self._gains: np.ndarray | None = None
         self._noise: tuple[float, ...] | np.ndarray | None = None
         self._t = -math.inf
@@ -126,12 +130,19 @@ class StateSource:
         # steady-state P and converges over some samples): Σ and nv from the first step's
         # gain were off by up to 4000x (a 1 kHz encoder's joint: nv 0.002 against 8.6
         # (rad/s²)² once settled), held for 0.25 s; so re-derive every sample until two
-        # successive gains agree to 1e-3
+        # successive gains agree to 1e-3, for at most _SETTLE_MAX samples: on real stamps the
+        # gain moves with each sample's dt (2 % stamp jitter at 1 kHz: 2e-3 per sample) and
+        # never agrees, and a derivation (Lyapunov solves, ~0.3 ms) on every sample put a
+        # 1 kHz node far behind its input (it lost samples)
         gains = np.concatenate([g.gain.ravel() for g in groups])
         last = self._gains
+        if key != self._key:
+            self._settle_left = _SETTLE_MAX
+        self._settle_left -= 1
         self._settling = key != self._key or (
-            self._settling and (last is None or last.shape != gains.shape
-                                or not np.allclose(gains, last, rtol=1e-3, atol=0.0)))
+            self._settling and self._settle_left > 0
+            and (last is None or last.shape != gains.shape
+                 or not np.allclose(gains, last, rtol=1e-3, atol=0.0)))
         self._gains = gains
         self._dt_seat = dt
         worst = max(groups, key=lambda g: g.r)
