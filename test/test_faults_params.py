@@ -150,6 +150,7 @@ INVALID = [
     ("torque_node", ["publish_std:=true", "std_topic:=bad topic"], "std_topic"),
     ("torque_node", ["publish_std:=true", "std_topic:=joint_torques"], "std_topic"),  # the torques'
     ("torque_node", ["std_topic:=7"], "std_topic"),
+    ("torque_node", ["publish_std:=true", "subject_std:=ansur2"], "subject_std"),
     ("torque_node", ["estimator.kalman_min_bandwidth_hz:=-1.0"], "estimator.kalman_min_bandwidth_hz"),
     ("torque_node", ["estimator.kalman_min_bandwidth_hz:=.nan"], "estimator.kalman_min_bandwidth_hz"),
     ("torque_node", ["estimator.delay_s:=0.5"], "estimator.delay_s"),  # beyond 0.2 s

@@ -9,6 +9,7 @@ is matched with its joint_torques, and the bags are read by check_bag and by ros
 
 from __future__ import annotations
 
+import itertools
 import json
 import random
 import re
@@ -102,6 +103,38 @@ def unanswered(states: dict, torques: dict, grace_ns: int = 100_000_000) -> np.n
     return considered[~np.isin(considered, torques["stamp"])]
 
 
+def discovery_start(states: dict, torques: dict, lost: np.ndarray, pause_ns: int = 1_000_000_000,
+                    most_s: float = 3.0) -> np.ndarray:
+    """The unanswered samples of `lost` that precede the first answered sample of their
+    publisher session (sessions: joint_states runs split by pauses over pause_ns), asserted
+    to be a run from the session's first sample, under most_s long.
+
+    A DDS writer may match its reader before the reader matches it (discovery is two
+    one-way exchanges): trajectory_publisher then sees its subscribers (min_subscribers) and
+    streams, the recorder records, and the torque node drops the samples of a writer it does
+    not know yet; a volatile reader does not get them repaired. Seen once at load: the node
+    matched 460 ms after the publisher (docs/ros.md, "Start-up: a publisher can see its
+    subscriber ..."). That is not a sample the node lost: it never had it (the node's summary
+    says what it received)."""
+    st = states["stamp"]
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(st) > pause_ns) + 1, [len(st)]])
+    answered = np.isin(st, torques["stamp"])
+    early = np.zeros(len(lost), bool)
+    for a, b in itertools.pairwise(starts):
+        hit = np.flatnonzero(answered[a:b])
+        first = a + (hit[0] if len(hit) else b - a)
+        if first > a:
+            assert (st[first - 1] - st[a]) / 1e9 < most_s, (a, first)
+            early |= (lost >= st[a]) & (lost < st[first] if first < b else lost <= st[b - 1])
+    return early
+
+
+def processed_all_received(output: str) -> int | None:
+    """The node's shutdown summary: how many samples it received, if it processed every one."""
+    m = re.search(r"summary: received (\d+), processed (\d+)", output)
+    return int(m.group(1)) if m is not None and m.group(1) == m.group(2) else None
+
+
 def start_pipeline(procs: Procs, tmp: Path, domain: int):
     node = procs.start("torque_node", "-p", "diagnostics_period:=0.5", *EXACT, domain=domain)
     rec = procs.start("bag_recorder", "-p", f"output:={tmp / 'run.mcap'}", domain=domain)
@@ -145,8 +178,13 @@ def test_publisher_killed_and_restarted(procs, tmp_path) -> None:
     states, torques = joint_series(bag, "joint_states"), joint_series(bag, "joint_torques")
     warmups = check_torque_stream(torques)
     lost = unanswered(states, torques)
+    early = discovery_start(states, torques, lost)
+    received = processed_all_received(node.output())
+    assert received is not None, node.output()[-2000:]
     # a sample in flight at the kill may reach one subscriber and not the other
-    assert len(lost) <= 1, lost
+    assert (~early).sum() <= 1, lost[~early]
+    # the node received every recorded sample but the ones before it knew the publisher
+    assert abs(received - (len(states["stamp"]) - early.sum())) <= 1, (received, early.sum())
     kill_gap = np.diff(states["stamp"]).max() / 1e9
     markers = bag.info.topic_counts()["/movement"]
     th = relaxed_thresholds(tmp_path, loss_max=1)
@@ -223,6 +261,8 @@ def test_torque_node_killed_and_restarted(procs, tmp_path) -> None:
         check_torque_stream(back, prev=(int(states["stamp"][k]), states["velocity"][k]))
         joined = "after its first answers"
     lost = unanswered(states, torques)
+    lost = lost[~discovery_start(states, torques, lost)]
+    assert processed_all_received(node2.output()) is not None, node2.output()[-2000:]
     first_back = back["stamp"].min()
     # unanswered: only what was published while no node ran (and what it held when killed);
     # from the new node's first answer on, every sample is answered

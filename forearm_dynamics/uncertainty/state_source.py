@@ -43,10 +43,13 @@ from .lag import MAX_BASELINE
 #: sample period or the noise belief moved: they change only with those
 _REFRESH_S = 0.25
 _DT_MOVE = math.log(1.05)
-#: after a regroup, re-derive on every sample for at most this many samples (the gain of a
-#: uniform 1 kHz stream settles to 1e-3 within 28-90)
+#: after a regroup, re-derive for at most this many samples (the gain of a uniform 1 kHz
+#: stream settles to 1e-3 within 28-90)
 _SETTLE_MAX = 100
+#: ... and while settling, re-derive at most this often (s of stream time)
+_SETTLE_EVERY_S = 0.004
 _IDX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+_ROWS, _COLS = (np.array(x) for x in zip(*_IDX))
 
 
 def lag_per_jerk(k: np.ndarray, dt: float, velocity_given: bool) -> np.ndarray:
@@ -62,7 +65,9 @@ def lag_per_jerk(k: np.ndarray, dt: float, velocity_given: bool) -> np.ndarray:
 
 def noise_covariance(k: np.ndarray, dt: float, r: np.ndarray, baseline: int) -> tuple[np.ndarray, float]:
     """(Σ (3, 3) of the noise-driven estimation error, the noise variance of the q̈ change
-    over `baseline` samples) for gain k (3, m), period dt, measurement covariance r (m, m)."""
+    over `baseline` samples) for gain k (3, m), period dt, measurement covariance r (m, m).
+    The reference (scipy's Lyapunov solver, one gain); StateSource uses unit_noise_covariances,
+    which solves every group at once and is tested against this."""
     m = k.shape[1]
     h = observation(m == 2)
     f = transition(dt)
@@ -73,6 +78,36 @@ def noise_covariance(k: np.ndarray, dt: float, r: np.ndarray, baseline: int) -> 
     sig = solve_discrete_lyapunov(ts, ks @ r @ ks.T) / np.outer(t, t)
     cross = np.linalg.matrix_power(a, baseline) @ sig  # Cov(e_k, e_{k-m}) = A^m Σ
     return sig, 2.0 * float(sig[2, 2] - cross[2, 2])
+
+
+def lags_per_jerk(k: np.ndarray, dt: float, velocity_given: bool) -> np.ndarray:
+    """lag_per_jerk for a stack of gains k (G, 3, m): (G, 3)."""
+    h = observation(velocity_given)
+    f = transition(dt)
+    g = np.array([dt**3 / 6, dt**2 / 2, dt])
+    ikh = np.eye(3) - k @ h  # (G, 3, 3)
+    return -np.linalg.solve(np.eye(3) - ikh @ f, (ikh @ g)[..., None])[..., 0]
+
+
+def unit_noise_covariances(k: np.ndarray, dt: float, baseline: int) -> tuple[np.ndarray, np.ndarray]:
+    """noise_covariance for a stack of gains k (G, 3, m) and each unit measurement noise
+    (R = e_i e_iᵀ, i < m; Σ is linear in R): (Σ (G, m, 3, 3), q̈-change variance (G, m)).
+
+    One batched solve of the Lyapunov equations in Kronecker form, vec Σ = (I - A⊗A)⁻¹ vec Q,
+    in the scaled state (q, q̇ dt, q̈ dt²): 9x9 systems, one per group, instead of one scipy
+    call per group and unit (a regroup took ~1 ms of the 1 kHz node's callback that way)."""
+    gn, _, m = k.shape
+    h = observation(m == 2)
+    a = (np.eye(3) - k @ h) @ transition(dt)  # (G, 3, 3)
+    t = np.array([1.0, dt, dt * dt])
+    ts = a * (t[:, None] / t[None, :])
+    ks = k * t[:, None]  # (G, 3, m)
+    op = np.eye(9) - np.einsum("gij,gkl->gikjl", ts, ts).reshape(gn, 9, 9)
+    rhs = np.einsum("gim,gkm->gikm", ks, ks).reshape(gn, 9, m)  # vec(k_i k_iᵀ) per unit i
+    sig = np.linalg.solve(op, rhs).reshape(gn, 3, 3, m).transpose(0, 3, 1, 2) / np.outer(t, t)
+    am = np.linalg.matrix_power(a, baseline)  # (G, 3, 3): Cov(e_k, e_{k-m}) = A^m Σ
+    cross22 = np.einsum("gj,gmj->gm", am[:, 2, :], sig[:, :, :, 2])
+    return sig, 2.0 * (sig[:, :, 2, 2] - cross22)
 
 
 class StateSource:
@@ -120,46 +155,56 @@ class StateSource:
         p = est.period_s
         self._dt = dt = p if self._dt is None else self._dt + 0.05 * (p - self._dt)
         key = (velocity_given, est.groups_version)
-        if (key == self._key and not self._settling and t_s - self._t < _REFRESH_S
-                and abs(math.log(dt / self._dt_seat)) < _DT_MOVE):
-            return
+        if key == self._key:
+            if self._settling:
+                self._settle_left -= 1
+                if self._settle_left > 0 and t_s - self._t < _SETTLE_EVERY_S:
+                    return
+            elif t_s - self._t < _REFRESH_S and abs(math.log(dt / self._dt_seat)) < _DT_MOVE:
+                return
         groups = est.noise_groups()
         if not groups or dt <= 0.0:
             return
         # a regrouped filter's gain is not settled yet (a new group starts from a scaled or
         # steady-state P and converges over some samples): Σ and nv from the first step's
         # gain were off by up to 4000x (a 1 kHz encoder's joint: nv 0.002 against 8.6
-        # (rad/s²)² once settled), held for 0.25 s; so re-derive every sample until two
-        # successive gains agree to 1e-3, for at most _SETTLE_MAX samples: on real stamps the
-        # gain moves with each sample's dt (2 % stamp jitter at 1 kHz: 2e-3 per sample) and
-        # never agrees, and a derivation (Lyapunov solves, ~0.3 ms) on every sample put a
-        # 1 kHz node far behind its input (it lost samples)
+        # (rad/s²)² once settled), held for 0.25 s; so re-derive every _SETTLE_EVERY_S (every
+        # sample at 250 Hz and below) until two successive gains agree to 1e-3, for at most
+        # _SETTLE_MAX samples: on real stamps the gain moves with each sample's dt (2 % stamp
+        # jitter at 1 kHz: 2e-3 per sample) and never agrees. A derivation on every sample
+        # of a 1 kHz stream (one scipy Lyapunov solve per group, ~0.3-1 ms) put the node
+        # 30-50 ms behind its input after each regroup; batched (~0.1 ms) and every 4 ms it
+        # stays within the sample period
         gains = np.concatenate([g.gain.ravel() for g in groups])
         last = self._gains
         if key != self._key:
             self._settle_left = _SETTLE_MAX
-        self._settle_left -= 1
         self._settling = key != self._key or (
             self._settling and self._settle_left > 0
             and (last is None or last.shape != gains.shape
                  or not np.allclose(gains, last, rtol=1e-3, atol=0.0)))
         self._gains = gains
         self._dt_seat = dt
-        worst = max(groups, key=lambda g: g.r)
-        k = worst.gain
-        if k.shape[1] != (2 if velocity_given else 1):
+        m = 2 if velocity_given else 1
+        if any(g.gain.shape[1] != m for g in groups):
             return
-        self.lag = lag_per_jerk(k, dt, velocity_given)
+        gains3 = np.stack([g.gain for g in groups])  # (G, 3, m)
+        lags = lags_per_jerk(gains3, dt, velocity_given)  # (G, 3)
+        worst = max(range(len(groups)), key=lambda i: groups[i].r)
+        self.lag = lags[worst]
         self.baseline = int(min(MAX_BASELINE, max(1, round(abs(self.lag[2]) / dt))))
         # each joint lags by its own group's gain (a 0.1 deg elbow beside a 1 deg pro/sup, as
         # mocap IK gives, lags less than the pro/sup): the torque's lag weights take the
         # reference group's vector, so each joint's jerk is scaled by its q̈ lag over the
         # reference's (`lag_scale2`, squared): exact for the M·e₂ term; the smaller ∂τ/∂q·e₀
         # and ∂τ/∂q̇·e₁ terms are scaled alike (an approximation)
-        scale = np.ones(est.n)
+        n = est.n
+        gi = np.full(n, -1, np.intp)  # each joint's group (-1: in none yet)
+        for i, g in enumerate(groups):
+            gi[g.idx] = i
+        scale = np.ones(n)
         if self.lag[2] != 0.0:
-            for g in groups:
-                scale[g.idx] = lag_per_jerk(g.gain, dt, velocity_given)[2] / self.lag[2]
+            scale = np.where(gi >= 0, lags[gi, 2] / self.lag[2], 1.0)
         np.multiply(scale, scale, out=self.lag_scale2)
         r2, rv2 = est.measured_noise()
         # no noise where the samples show none: a joint whose white level (near Nyquist, no
@@ -170,24 +215,13 @@ class StateSource:
         r2 = np.where(est.noiseless(), 0.0, r2)
         floor = math.radians(est.values["kalman_noise_floor_deg"])
         rv2 = np.where(rv2 < floor * floor, 0.0, rv2)
-        n = est.n
-        cov = np.zeros((n, 6))
-        dnv = np.zeros(n)
-        for g in groups:
-            # Σ is linear in R = diag(n2, nv2): one solve per unit measurement, combined per joint
-            parts = []
-            for i in range(g.gain.shape[1]):
-                unit = np.zeros((g.gain.shape[1],) * 2)
-                unit[i, i] = 1.0
-                parts.append(noise_covariance(g.gain, dt, unit, self.baseline))
-            (s0, d0) = parts[0]
-            c0 = np.array([s0[i, j] for i, j in _IDX])
-            cov[g.idx] = r2[g.idx, None] * c0
-            dnv[g.idx] = r2[g.idx] * d0
-            if len(parts) == 2:
-                s1, d1 = parts[1]
-                cov[g.idx] += rv2[g.idx, None] * np.array([s1[i, j] for i, j in _IDX])
-                dnv[g.idx] += rv2[g.idx] * d1
+        # Σ is linear in R = diag(n2, nv2): one solve per unit measurement, combined per joint
+        sig, dvar = unit_noise_covariances(gains3, dt, self.baseline)  # (G, m, 3, 3), (G, m)
+        unit = sig[:, :, _ROWS, _COLS]  # (G, m, 6) in COV_KEYS order
+        w = np.stack([r2, rv2][:m], axis=1) * (gi >= 0)[:, None]  # (n, m): R per joint
+        g0 = np.maximum(gi, 0)
+        cov = np.einsum("jm,jmc->jc", w, unit[g0])
+        dnv = np.einsum("jm,jm->j", w, dvar[g0])
         if np.ptp(cov, axis=0).max() <= 1e-15 * max(np.abs(cov).max(), 1e-300):
             self._noise = tuple(float(x) for x in cov[0])  # shared: the propagator's fast path
             self.delta_noise_var = float(dnv[0])
