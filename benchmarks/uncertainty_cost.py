@@ -17,7 +17,8 @@ start and end is in the output: 2 cores shared with other work.
 First, in this process and without DDS (`in_process`): the thread CPU time per sample
 (preemption excluded) of the torque path's estimator update + RNEA and of the σ after it
 (TorqueStd.update + the σ message's bytes), linearising samples apart, on four library
-movements at 1 kHz with 0.1 deg noise.
+movements at 1 kHz with 0.1 deg noise; and (`continuous`) the σ's wall time per sample on
+the replay's own stream (the movements back to back, exact, with velocities).
 Writes benchmarks/uncertainty_cost.json.
 """
 
@@ -80,9 +81,52 @@ def in_process(movements=(3, 20, 37, 54), rate: float = 1000.0) -> dict:
                 continue
             rows["torque_path"].append((b - a) / 1e3)
             rows["std"].append((c - b) / 1e3)
-            rows["std_linearising" if ts._lin_t == t_ns * 1e-9 else "std_other"].append((c - b) / 1e3)
+            rows["std_linearising" if ts.evaluated_ns == t_ns else "std_other"].append((c - b) / 1e3)
     return {k: {"n": len(v), "p50": float(np.percentile(v, 50)), "p99": float(np.percentile(v, 99)),
                 "mean": float(np.mean(v))} for k, v in rows.items()}
+
+
+def continuous(movements: int = 10, rate: float = 1000.0) -> dict:
+    """The σ's wall time per sample (µs) on the node benchmark's own input, in this process:
+    library movements 1..N back to back, exact positions and velocities at 1 kHz, one
+    estimator and TorqueStd for the whole stream (as the node runs); how often the filter
+    regrouped and the state source re-derived, and the time in samples over 100 µs (the
+    bursts that hold up a 1 kHz node)."""
+    import numpy as np
+    from threadpoolctl import threadpool_limits
+
+    from forearm_dynamics import build_model
+    from forearm_dynamics.estimation import make_estimator
+    from forearm_dynamics.movements import movement_library
+    from forearm_dynamics.uncertainty import TorqueStd
+
+    threadpool_limits(1)  # as the nodes run (common.py)
+    arm, lib = build_model(), movement_library()
+    parts = [lib[i].evaluate(lib[i].sample_times(rate)) for i in range(1, movements + 1)]
+    q = np.concatenate([p[0] for p in parts])
+    qd = np.concatenate([p[1] for p in parts])
+    est = make_estimator("kalman", arm.nv)
+    ts = TorqueStd(arm, est)
+    wall = np.zeros(len(q))
+    derivations = regroups = 0
+    version = est.groups_version
+    clock = time.perf_counter_ns
+    for k in range(len(q)):
+        t_ns = 1_000_000_000 + round(k * 1e9 / rate)
+        est.update(t_ns, q[k], qd[k])
+        seated = ts.src._t
+        a = clock()
+        ts.update(t_ns, True)
+        wall[k] = (clock() - a) / 1e3
+        derivations += ts.src._t != seated
+        regroups += est.groups_version != version
+        version = est.groups_version
+    w = wall[500:]
+    return {"samples": len(q), "regroups": regroups, "derivations": derivations,
+            "p50": float(np.percentile(w, 50)), "mean": float(w.mean()),
+            "p99": float(np.percentile(w, 99)), "p99_9": float(np.percentile(w, 99.9)),
+            "max": float(w.max()), "over_100us_ms": float(w[w > 100].sum() / 1e3),
+            "seconds": len(q) / rate}
 
 
 MEDIAN_OF = (("callback_us", "p50"), ("callback_us", "p99"), ("callback_us", "publish_p50"),
@@ -124,6 +168,11 @@ def main(argv=None) -> int:
     for k, x in out["in_process"].items():
         print(f"in process, no DDS: {k:16s} p50 {x['p50']:6.1f} p99 {x['p99']:6.1f} mean {x['mean']:6.1f} "
               f"us CPU ({x['n']} samples)", flush=True)
+    c = out["continuous"] = continuous(args.movements)
+    print(f"in process, the benchmark's stream ({c['samples']} samples, {c['regroups']} regroups, "
+          f"{c['derivations']} derivations): σ p50 {c['p50']:.1f} mean {c['mean']:.1f} p99 "
+          f"{c['p99']:.1f} p99.9 {c['p99_9']:.1f} max {c['max']:.0f} us wall; "
+          f"{c['over_100us_ms']:.0f} ms in samples over 100 us", flush=True)
     with tempfile.TemporaryDirectory(prefix="std_cost_") as tmp:
         for r in range(args.repeat):
             for v in VARIANTS:

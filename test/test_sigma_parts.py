@@ -17,7 +17,7 @@ import pytest
 from forearm_dynamics.dynamics import build_model
 from forearm_dynamics.estimation import ca_model, make_estimator
 from forearm_dynamics.movements import movement_library
-from forearm_dynamics.uncertainty import inverse_dynamics_with_std, lag
+from forearm_dynamics.uncertainty import inverse_dynamics_with_std, lag, torque_std
 from forearm_dynamics.uncertainty.state_source import (
     lag_per_jerk,
     lags_per_jerk,
@@ -213,3 +213,40 @@ def test_torque_std_reads_the_scaled_jerk(arm):
     want = np.maximum(tr._ms, 0.0) * src.lag_scale2  # the noise-corrected average, scaled
     assert want[0] > 0 and want[1] > 0
     np.testing.assert_allclose(tr.ms_jerk, want, rtol=1e-9)
+
+
+def test_the_sigma_is_evaluated_every_4_ms_and_held_in_between(arm, monkeypatch):
+    """At 1 kHz TorqueStd evaluates (covariance source, jerk read, derivatives) every
+    EVALUATE_S of stream time and keeps that σ for the samples in between; at 100 Hz every
+    sample. The held σ is the σ an evaluation on every sample gives to within 5 % (RMS per
+    joint; noise fixed, so that both see the same covariance: the jerk average is the only
+    difference)."""
+    mv = movement_library()[4]
+    rng = np.random.default_rng(8)
+    for rate, every in ((1000.0, 4), (RATE, 1)):
+        t = mv.sample_times(rate)
+        z = mv.evaluate(t)[0] + rng.normal(0.0, math.radians(0.1), (len(t), arm.nv))
+        est = make_estimator("kalman", arm.nv, {"kalman_noise_deg": 0.1})
+        ts = TorqueStd(arm, est)
+        stamps, held = [], 0
+        for k in range(len(t)):
+            t_ns = round(t[k] * 1e9)
+            est.update(t_ns, z[k], None)
+            before = ts.std.copy()
+            known = ts.update(t_ns, False)
+            if ts.evaluated_ns == t_ns:
+                stamps.append(t_ns)
+            elif known:
+                np.testing.assert_array_equal(ts.std, before)
+                held += 1
+        steps = np.diff(stamps[5:])
+        assert np.all(steps == round(every * 1e9 / rate)), np.unique(steps)
+        assert (held > 0) == (every > 1)
+    t = mv.sample_times(1000.0)
+    z = mv.evaluate(t)[0] + rng.normal(0.0, math.radians(0.1), (len(t), arm.nv))
+    held = inverse_dynamics_with_std(arm, t, z, settings={"kalman_noise_deg": 0.1})
+    monkeypatch.setattr(torque_std, "EVALUATE_S", 0.0)
+    fresh = inverse_dynamics_with_std(arm, t, z, settings={"kalman_noise_deg": 0.1})
+    k = held.known & fresh.known
+    ratio = np.sqrt((held.std[k] ** 2).mean(0) / (fresh.std[k] ** 2).mean(0))
+    np.testing.assert_allclose(ratio, 1.0, atol=0.05)

@@ -70,16 +70,27 @@ class JerkTracker:
     def rms(self) -> np.ndarray:
         return np.sqrt(self.ms_jerk)
 
-    def update(self, t_ns: int, qdd: np.ndarray, m: int, noise_var, scale2=None) -> np.ndarray:
-        """Mean-square jerk after the estimate q̈ at t_ns; m the baseline (samples), noise_var
-        the mean square the noise alone gives D ((rad/s²)², scalar or (n,)); scale2 (n,) or
-        None: a per-joint factor on the result (state_source.lag_scale2: each joint's own lag
-        over the reference one's, squared)."""
-        ring, c = self._ring, self._count
-        size = len(ring)
-        np.copyto(ring[c % size], qdd)
-        self._stamps[c % size] = t_ns
+    def push(self, t_ns: int, qdd: np.ndarray) -> None:
+        """Keep the q̈ estimate at t_ns (every sample: the baseline m counts samples)."""
+        c = self._count
+        if c and t_ns <= int(self._stamps[(c - 1) % len(self._ring)]):
+            return  # not after the last one: the read would span no time
+        np.copyto(self._ring[c % len(self._ring)], qdd)
+        self._stamps[c % len(self._ring)] = t_ns
         self._count = c + 1
+
+    def read(self, m: int, noise_var, scale2=None) -> np.ndarray:
+        """Mean-square jerk after the last pushed sample, averaged since the last read; m the
+        baseline (samples), noise_var the mean square the noise alone gives D ((rad/s²)²,
+        scalar or (n,)); scale2 (n,) or None: a per-joint factor on the result
+        (state_source.lag_scale2: each joint's own lag over the reference one's, squared).
+        Read every sample or every few (TorqueStd: every EVALUATE_S): the average weighs
+        each read by the time since the previous one."""
+        c = self._count - 1  # the last pushed sample
+        if c < 0:
+            return self.ms_jerk
+        ring, size = self._ring, len(self._ring)
+        t_ns = int(self._stamps[c % size])
         if self._t_ns is None or t_ns <= self._t_ns or c < m:
             if self._t_ns is None or t_ns <= self._t_ns:
                 self._t_ns = t_ns
@@ -88,7 +99,7 @@ class JerkTracker:
         self._t_ns = t_ns
         span = (t_ns - int(self._stamps[(c - m) % size])) * 1e-9
         d, out = self._tmp, self.ms_jerk
-        np.subtract(qdd, ring[(c - m) % size], out=d)
+        np.subtract(ring[c % size], ring[(c - m) % size], out=d)
         d *= d
         np.multiply(noise_var, 1.0 + NOISE_MARGIN, out=out)
         d -= out
@@ -100,3 +111,8 @@ class JerkTracker:
         if scale2 is not None:
             out *= scale2
         return out
+
+    def update(self, t_ns: int, qdd: np.ndarray, m: int, noise_var, scale2=None) -> np.ndarray:
+        """push() and read() in one: the mean-square jerk after the estimate q̈ at t_ns."""
+        self.push(t_ns, qdd)
+        return self.read(m, noise_var, scale2)

@@ -123,9 +123,9 @@ class Propagator:
     jerk (two matrix-vector products) and σ = sqrt(Var_est + σ_lag² + model part + floor).
     No per-joint loop and no factorisation: a new covariance or lag vector costs one product
     on the cached derivatives, which is what a prediction over a horizon needs
-    (TorqueStd.predict). TorqueStd relinearises every RELINEARISE_S of stream time: the
-    Jacobians and the noise covariance move on the time scale of the movement, the jerk
-    term is what changes fast, and it is current on every sample.
+    (TorqueStd.predict). TorqueStd evaluates (relinearise and jerk) every EVALUATE_S of
+    stream time: the Jacobians and the noise covariance move on the time scale of the
+    movement, the jerk term is averaged over 60 ms.
 
     `var_est`, `var_lag` hold the two variable parts (N·m²) of the last call and `std` the
     total σ (N·m) with the constant model part `model_var` (per DOF, N·m², model_term.py)

@@ -43,8 +43,8 @@ from .lag import MAX_BASELINE
 #: sample period or the noise belief moved: they change only with those
 _REFRESH_S = 0.25
 _DT_MOVE = math.log(1.05)
-#: after a regroup, re-derive for at most this many samples (the gain of a uniform 1 kHz
-#: stream settles to 1e-3 within 28-90)
+#: after a regroup, re-derive for at most this many sample periods (the gain of a uniform
+#: 1 kHz stream settles to 1e-3 within 28-90 samples)
 _SETTLE_MAX = 100
 #: ... and while settling, re-derive at most this often (s of stream time)
 _SETTLE_EVERY_S = 0.004
@@ -131,7 +131,7 @@ class StateSource:
         self.baseline = 1
         self._known = False
         self._settling = False
-        self._settle_left = 0  # settling derivations left before it stops regardless
+        self._settle_until = 0.0  # stream time (s) settling stops at regardless
         self._gains: np.ndarray | None = None
         self._noise: tuple[float, ...] | np.ndarray | None = None
         self._t = -math.inf
@@ -157,8 +157,7 @@ class StateSource:
         key = (velocity_given, est.groups_version)
         if key == self._key:
             if self._settling:
-                self._settle_left -= 1
-                if self._settle_left > 0 and t_s - self._t < _SETTLE_EVERY_S:
+                if t_s < self._settle_until and t_s - self._t < _SETTLE_EVERY_S:
                     return
             elif t_s - self._t < _REFRESH_S and abs(math.log(dt / self._dt_seat)) < _DT_MOVE:
                 return
@@ -178,9 +177,9 @@ class StateSource:
         gains = np.concatenate([g.gain.ravel() for g in groups])
         last = self._gains
         if key != self._key:
-            self._settle_left = _SETTLE_MAX
+            self._settle_until = t_s + _SETTLE_MAX * dt
         self._settling = key != self._key or (
-            self._settling and self._settle_left > 0
+            self._settling and t_s < self._settle_until
             and (last is None or last.shape != gains.shape
                  or not np.allclose(gains, last, rtol=1e-3, atol=0.0)))
         self._gains = gains

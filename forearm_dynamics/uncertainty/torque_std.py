@@ -19,11 +19,14 @@ from .propagation import Propagator, extrapolated
 from .state_source import state_source
 from .subject import subject_spread
 
-#: the derivatives (∂τ/∂q, ∂τ/∂q̇, M), and with them the estimation part and the lag
-#: weights, are re-evaluated every RELINEARISE_S of stream time (at 1 kHz every 4th sample;
-#: at 250 Hz and below every sample) and whenever the covariance changed; τ and the jerk
-#: term are computed on every sample (propagation.Propagator)
-RELINEARISE_S = 0.004
+#: the σ is evaluated at most this often (s of stream time; at 1 kHz every 4th sample, at
+#: 250 Hz and below every sample): the covariance source's refresh, the jerk read and the
+#: propagation at the current estimate (computeRNEADerivatives); between evaluations the last
+#: σ stands. The jerk term averages over JERK_TAU_S (60 ms) and the derivatives move on the
+#: movement's time scale, so a σ up to 4 ms old differs little from a fresh one; evaluated on
+#: every sample it cost a 1 kHz node ~85 µs of every callback (benchmarks/uncertainty_cost.py:
+#: callback p50 with the σ computed but not written, against without the σ)
+EVALUATE_S = 0.004
 
 
 class NoCovariance(ValueError):
@@ -54,37 +57,47 @@ class TorqueStd:
         self.jerk = JerkTracker(arm.nv, tau_s)
         self.gain, self.tau_s = float(gain), float(tau_s)
         self.std = self.prop.std
-        self._lin_cov: tuple | None = None  # the covariance object of the last linearisation
-        self._lin_t = 0.0
-        self._jerk_ms = self.jerk.ms_jerk  # the mean-square jerk after the last sample
+        self._eval_ns: int | None = None  # the stamp of the last evaluation
+        self._known = False  # whether the σ of the last update() is known
+        self._holds_update = False  # self.std holds the last update()'s σ (not a prediction's)
+        self.evaluated_ns: int | None = None  # the stamp the σ in self.std was evaluated at
+        self._jerk_ms = self.jerk.ms_jerk  # the mean-square jerk at the last evaluation
 
     def reset(self) -> None:
         self.jerk.reset()
-        self._lin_cov = None
+        self._eval_ns = None
+        self._known = self._holds_update = False
 
-    def observe(self, t_ns: int, velocity_given: bool) -> None:
-        """After est.update(t_ns, ...): the covariance source and the jerk take the sample
-        (what update() does before propagating; alone when only predictions are output)."""
+    def observe(self, t_ns: int, velocity_given: bool) -> bool:
+        """After est.update(t_ns, ...): the jerk tracker keeps the q̈ estimate; every
+        EVALUATE_S the covariance source and the jerk read are brought up to date (what
+        update() does before propagating; alone when only predictions are output). True when
+        it evaluated."""
+        self.jerk.push(t_ns, self.est.qdd)
+        if self._eval_ns is not None and 0 <= t_ns - self._eval_ns < EVALUATE_S * 1e9:
+            return False
+        self._eval_ns = t_ns
         src = self.src
         src.refresh(t_ns * 1e-9, velocity_given)
-        self._jerk_ms = self.jerk.update(t_ns, self.est.qdd, src.baseline, src.delta_noise_var,
-                                        src.lag_scale2)
+        self._jerk_ms = self.jerk.read(src.baseline, src.delta_noise_var, src.lag_scale2)
+        return True
 
     def update(self, t_ns: int, velocity_given: bool) -> bool:
-        """After est.update(t_ns, ...): σ into self.std; False (untouched) while the
-        estimator has no covariance yet (its first sample)."""
-        est, src = self.est, self.src
-        self.observe(t_ns, velocity_given)
-        cov = src.cov()
+        """After est.update(t_ns, ...): σ into self.std, evaluated at the estimate every
+        EVALUATE_S (the last one stands in between); False (σ unknown) while the estimator
+        has no covariance yet or its noise is not measured."""
+        if not self.observe(t_ns, velocity_given) and self._holds_update:
+            return self._known
+        self._holds_update = True
+        est = self.est
+        cov = self.src.cov()
+        self._known = cov is not None
         if cov is None:
             return False
-        t_s = t_ns * 1e-9
-        lin = cov is not self._lin_cov or not 0.0 <= t_s - self._lin_t < RELINEARISE_S
-        if lin:
-            self._lin_cov, self._lin_t = cov, t_s
-            if self.subject is not None:  # at the same cadence as the estimation part
-                self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
-        self.prop(est.q, est.qd, est.qdd, cov, src.lag if self.use_lag else None, self._jerk_ms, lin)
+        if self.subject is not None:  # at the same cadence as the estimation part
+            self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
+        self.prop(est.q, est.qd, est.qdd, cov, self.src.lag if self.use_lag else None, self._jerk_ms, True)
+        self.evaluated_ns = t_ns
         return True
 
     def predict(self, t_ns: int) -> bool:
@@ -102,7 +115,7 @@ class TorqueStd:
         if self.subject is not None:
             self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
         self.prop(est.q, est.qd, est.qdd, cov_h, lag, self._jerk_ms, True)
-        self._lin_cov = None  # the next update() linearises at its own state
+        self._holds_update = False  # self.std is this prediction's: update() propagates afresh
         return True
 
     def parts(self) -> dict:
@@ -115,7 +128,7 @@ class TorqueStd:
                     "x the RMS jerk (change of the qdd estimate over one qdd lag, noise part removed, "
                     f"mean square over {self.tau_s:g} s), through the same "
                     "derivatives (uncertainty/lag.py)") if self.use_lag else "off",
-            "linearised_every_s": RELINEARISE_S,
+            "evaluated_every_s": EVALUATE_S,
             "prediction": "an output extrapolated h ahead of the estimate (output_rate_hz > 0): "
                           "covariance F(h) Σ F(h)ᵀ and lag per unit jerk F(h) e - (h³/6, h²/2, h), "
                           "F the constant-acceleration transition, linearised at the extrapolated "
