@@ -131,6 +131,44 @@ def test_waits_for_a_subscriber_then_gives_up(peer) -> None:
     assert time.monotonic() - t >= 0.5 + get_movement(2).duration
 
 
+def test_on_simulated_time_the_waits_count_from_the_first_clock(peer) -> None:
+    """use_sim_time: the node's clock reads 0 until the first /clock. Its start delay and its
+    wait for subscribers count from the first time the node sees: with no subscriber, 1 s of
+    simulated time into a 60 s subscriber_timeout it still waits (a wait measured from 0 was
+    over at the first tick: 'publishing anyway', the closed-loop example's first movement
+    lost); once one subscribes, the first sample is at least start_delay after the clock
+    started."""
+    from rosgraph_msgs.msg import Clock
+
+    t0 = 1_000_000_000_000  # simulated 1000 s
+    clock = {"ns": t0, "on": False}
+    clock_pub = peer.node.create_publisher(Clock, "/clock", 10)
+
+    def tick() -> None:
+        if clock["on"]:
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = divmod(clock["ns"], 1_000_000_000)
+            clock_pub.publish(msg)
+            clock["ns"] += 2_000_000  # 2 ms of simulated time per tick
+
+    peer.node.create_timer(0.002, tick)
+    proc = rosproc.start("trajectory_publisher", "-p", "movements:=[2]", "-p", "start_delay:=0.5",
+                         "-p", "min_subscribers:=1", "-p", "subscriber_timeout:=60.0",
+                         "-p", "use_sim_time:=true")
+    try:
+        assert peer.spin_until(lambda: peer.node.count_publishers("/clock") >= 1
+                               and peer.node.count_subscribers("/clock") >= 1, 120), proc.output()
+        clock["on"] = True
+        assert peer.spin_until(lambda: clock["ns"] - t0 >= 1_000_000_000, 60)
+        assert "publishing anyway" not in proc.output(), proc.output()
+        samples, _ = listen(peer)
+        assert peer.spin_until(lambda: len(samples) >= 10, 120), proc.output()
+    finally:
+        proc.stop(signal.SIGINT)
+    assert "publishing anyway" not in proc.output(), proc.output()
+    assert stamp_ns(samples[0]) - t0 >= 0.5e9, (stamp_ns(samples[0]) - t0) / 1e9
+
+
 SENSOR = ("-p", "noise_deg:=0.5", "-p", "publish_velocity:=false", "-p", "jitter_ms:=1.0",
           "-p", "drop_fraction:=0.2", "-p", "seed:=7", "-p", "rate_hz:=200.0")
 

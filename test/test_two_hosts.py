@@ -8,7 +8,6 @@ link (and do not with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST: the hosts are rea
 from __future__ import annotations
 
 import errno
-import json
 import os
 import socket
 import subprocess
@@ -18,6 +17,7 @@ from pathlib import Path
 import hostkit
 import pytest
 import rosproc
+from support.two_host_replay import replay_in_b
 
 from forearm_dynamics.processes import BIN
 
@@ -101,30 +101,15 @@ def test_only_the_other_host_is_reachable():
 def _replay(h: hostkit.TwoHosts, tmp: Path, node_discovery: str, movements: str = "[1]") -> dict:
     """torque_node in A; trajectory_publisher + bag_recorder in B; B's bag as check_bag reads it.
 
-    start_delay 8 s: the publisher waits for its joint_states subscribers only; B's recorder
-    matched A's joint_torques ~0.3 s later across the link in a loaded run (296 first
-    answers unrecorded with 2 s)."""
+    (support.two_host_replay)"""
     domain = rosproc.test_domain(102, 139)
     bag = tmp / f"b_{node_discovery}.mcap"
     node = h.a.start([str(BIN / "torque_node")], host_env(domain, tmp, node_discovery), tmp / "a_node.log")
     env_b = host_env(domain, tmp)
-    rec = h.b.start([str(BIN / "bag_recorder"), "--ros-args", "-p", f"output:={bag}"], env_b,
-                    tmp / "b_rec.log")
-    pub = h.b.start([str(BIN / "trajectory_publisher"), "--ros-args", "-p", f"movements:={movements}",
-                     "-p", "start_delay:=8.0", "-p", "min_subscribers:=2", "-p",
-                     "subscriber_timeout:=20.0"], env_b, tmp / "b_pub.log")
     rx0 = _veth_rx_packets(h.a)
-    assert pub.wait(timeout=180) == 0, (tmp / "b_pub.log").read_text()[-2000:]
-    rx = _veth_rx_packets(h.a) - rx0
-    for p in (rec, node):
-        p.send_signal(2)
-        assert p.wait(timeout=30) == 0
-    report = tmp / "check.json"
-    r = subprocess.run([str(BIN / "check_bag"), str(bag), "--json", str(report)], check=False,
-                       capture_output=True, text=True, timeout=300)
-    return {"code": r.returncode, "out": r.stdout + r.stderr, "veth_rx": rx,
-            "report": json.loads(report.read_text()) if report.exists() else None,
-            "node_log": (tmp / "a_node.log").read_text()}
+    out = replay_in_b(h, node, env_b, tmp, bag, movements, subscriber_timeout=20.0)
+    out["veth_rx"] = _veth_rx_packets(h.a) - rx0
+    return out
 
 
 def test_torques_cross_the_hosts_and_localhost_keeps_them_apart(tmp_path):

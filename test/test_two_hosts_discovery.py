@@ -12,7 +12,6 @@ and recorder in B), and B's bag checks clean with check_bag.
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -22,6 +21,7 @@ from pathlib import Path
 import hostkit
 import pytest
 import rosproc
+from support.two_host_replay import replay_in_b
 
 from forearm_dynamics.processes import BIN
 
@@ -156,26 +156,11 @@ def test_fastdds_discovery_needs_the_venv_first_on_path(tmp_path):
 
 
 def _pipeline(h: hostkit.TwoHosts, tmp: Path, env_a: dict, env_b: dict, movements: str) -> dict:
-    """torque_node in A; trajectory_publisher + bag_recorder in B; check_bag on B's bag.
-    start_delay 8 s: B's recorder matches A's joint_torques a moment after the publisher's
-    subscribers match (test_two_hosts.py)."""
-    bag = tmp / "b.mcap"
+    """torque_node in A; trajectory_publisher + bag_recorder in B; check_bag on B's bag
+    (support.two_host_replay)."""
     node = start_node(h, env_a, tmp)
-    rec = h.b.start([str(BIN / "bag_recorder"), "--ros-args", "-p", f"output:={bag}"], env_b,
-                    tmp / "b_rec.log")
-    pub = h.b.start([str(BIN / "trajectory_publisher"), "--ros-args", "-p", f"movements:={movements}",
-                     "-p", "start_delay:=8.0", "-p", "min_subscribers:=2", "-p",
-                     "subscriber_timeout:=60.0"], env_b, tmp / "b_pub.log")
-    assert pub.wait(timeout=240) == 0, (tmp / "b_pub.log").read_text()[-2000:]
-    for p in (rec, node):
-        p.send_signal(2)
-        assert p.wait(timeout=30) == 0
-    report = tmp / "check.json"
-    r = subprocess.run([str(BIN / "check_bag"), str(bag), "--json", str(report)], check=False,
-                       capture_output=True, text=True, timeout=300)
-    return {"code": r.returncode, "out": r.stdout + r.stderr,
-            "report": json.loads(report.read_text()) if report.exists() else None,
-            "node_log": (tmp / "a_node.log").read_text()}
+    return replay_in_b(h, node, env_b, tmp, tmp / "b.mcap", movements, subscriber_timeout=60.0,
+                       hang_s=240.0)
 
 
 def test_discovery_server_pipeline_without_multicast_checks_clean(tmp_path):

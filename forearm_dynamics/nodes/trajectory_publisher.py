@@ -187,7 +187,10 @@ class TrajectoryPublisher(Node):
         self.marker_pub = self.create_publisher(String, s.marker_topic, marker_qos())
 
         self._period_ns = round(1e9 / s.rate_hz)
-        self._started_ns = self._now_ns()
+        # set at the first tick: with use_sim_time the clock reads 0 until the first /clock,
+        # and a wait measured from 0 was over at once ("0 of 1 subscribers after 1.8e9 s;
+        # publishing anyway": the closed-loop example lost its first movement)
+        self._started_ns: int | None = None
         self._playing = False
         self._index = -1  # position in the playlist
         self.movement: Movement = s.movements[0]  # the one playing (or last played)
@@ -241,6 +244,8 @@ class TrajectoryPublisher(Node):
     def _ready(self, now: int) -> bool:
         """Start delay over and enough subscribers present (or the wait for them timed out)."""
         s = self.settings
+        if self._started_ns is None:
+            self._started_ns = now
         waited = (now - self._started_ns) * 1e-9
         if waited < s.start_delay:
             return False
