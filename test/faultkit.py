@@ -132,7 +132,11 @@ if burst:  # every answer this feeder received (it paces by them, so it keeps up
     with open(cfg["out"] + ".answers", "w") as fh:
         fh.write("\n".join(map(str, sorted(answered))))
 print("published", len(stamps), f"{elapsed:.3f}", flush=True)
-pub.wait_for_all_acked(Duration(seconds=cfg.get("drain", 5.0)))
+# every sample acknowledged by every reader before this process (and its writer's repairs)
+# goes; `drain` is a hang guard (120 s for the 10 000-sample bursts: with 5 s, on a loaded
+# machine, the writer went with samples unrepaired and the burst test never got its last answer)
+acked = pub.wait_for_all_acked(Duration(seconds=cfg.get("drain", 5.0)))
+print("all acknowledged" if acked else "NOT all acknowledged by the readers", flush=True)
 node.destroy_node()
 rclpy.shutdown()
 """
@@ -141,18 +145,21 @@ rclpy.shutdown()
 def start_feeder(procs: Procs, tmp: Path, domain: int, *, count: int, rate_hz: float,
                  names=JOINT_NAMES, position=POSTURE, velocity=None, step_ns: int = 0,
                  depth: int = 1000, name: str = "feeder", burst: int = 0,
-                 answers_topic: str = "joint_torques") -> tuple[subprocess.Popen, Path, Path]:
+                 answers_topic: str = "joint_torques", drain: float = 5.0,
+                 ) -> tuple[subprocess.Popen, Path, Path]:
     """Publish `count` JointStates at rate_hz (0 = as fast as possible); stamps go to a file.
 
     `burst` > 0: after every `burst` samples, wait until the last one is answered on
-    `answers_topic` (a busy machine then slows the feed instead of overflowing queues)."""
+    `answers_topic` (a busy machine then slows the feed instead of overflowing queues).
+    `drain`: at most this long (s) for every reader to acknowledge every sample before the
+    feeder exits; its log says "all acknowledged" or not."""
     import json
 
     out = tmp / f"{name}_stamps.txt"
     cfg = {"names": list(names), "position": [float(x) for x in position],
            "velocity": [0.0] * len(names) if velocity is None else [float(x) for x in velocity],
            "rate_hz": rate_hz, "count": count, "step_ns": step_ns, "depth": depth, "out": str(out),
-           "burst": burst, "answers_topic": answers_topic}
+           "burst": burst, "answers_topic": answers_topic, "drain": drain}
     feeder = procs.add(rosproc.NodeProcess(name, [sys.executable, "-c", FEEDER, json.dumps(cfg)],
                                            rosproc.ros_env(domain), tmp))
     return feeder.proc, out, feeder.log
