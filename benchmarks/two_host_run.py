@@ -145,6 +145,48 @@ class CpuShare:
             self.path.rmdir()
 
 
+def answers_recorded(bag: Path) -> tuple[int, int | None, int]:
+    """In the recording being written (its closed chunks): the unique stamps on
+    /joint_torques, the torque node's processed_total in its last /diagnostics, and that
+    message's log time (ns; 0 without one)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message
+
+    from forearm_dynamics.bag import open_bag
+    from forearm_dynamics.errors import BagError
+
+    stamps: set[bytes] = set()
+    processed, at = None, 0
+    try:
+        for ch, msg in open_bag(bag).messages(["/joint_torques", "/diagnostics"]):
+            if ch.topic == "/joint_torques":
+                stamps.add(bytes(msg.data[4:12]))
+                continue
+            for status in deserialize_message(msg.data, DiagnosticArray).status:
+                if "torque_node" in status.name:
+                    for kv in status.values:
+                        if kv.key == "processed_total":
+                            processed, at = int(kv.value), msg.log_time
+    except BagError:
+        pass
+    return len(stamps), processed, at
+
+
+def _drain(bag: Path, after_ns: int, hang_s: float = 90.0) -> bool:
+    """Wait until B's recording holds an answer for every sample the node processed (its
+    /diagnostics after `after_ns`, when the input has stopped: the final count). The node's
+    output is reliable: an answer lost near the end of the stream is repaired after the
+    writer's next heartbeat (Fast DDS's default: every 3 s), so a fixed grace cut some off
+    (15 of 15 000 at 5 % loss both ways: counted as lost). False after hang_s (a guard)."""
+    deadline = time.monotonic() + hang_s
+    while time.monotonic() < deadline:
+        n, processed, at = answers_recorded(bag)
+        if processed is not None and at > after_ns + 1_000_000_000 and n >= processed:
+            return True
+        time.sleep(0.5)
+    return False
+
+
 def bag_figures(bag: Path) -> dict:
     """From B's bag: torques recorded (and unique stamps), joint_states sent (B's own
     recording: every sample its publisher sent), the stamps without an answer, latency."""
@@ -233,7 +275,7 @@ def run_case(case: Case, movements: int, domain: int, work: Path, *, node_args: 
         finally:
             if stalls:
                 stalls.stop()
-        time.sleep(1.0)  # the last answers on their way
+        drained = _drain(bag, time.time_ns())  # the last answers (and their repairs) recorded
         st = proc_stat(node.pid)
         node_cpu_s = st.cpu_s - st0.cpu_s if st and st0 and streaming else None
         stream_s = time.monotonic() - t0
@@ -266,6 +308,7 @@ def run_case(case: Case, movements: int, domain: int, work: Path, *, node_args: 
             "lost": sent - fig["unique"] if sent is not None else None,
             "packets_dropped": dropped, "udp": udp, "node_socket_rcvbuf": buffers,
             "node_cpu_s": node_cpu_s, "stream_s": stream_s, **fig,
-            "check_bag_exit": check.returncode, "check_bag_tail": (check.stdout + check.stderr)[-600:],
+            "drained": drained, "check_bag_exit": check.returncode,
+            "check_bag_tail": (check.stdout + check.stderr)[-600:],
             "check": json.loads(report.read_text()) if report.exists() else None,
             "node_log_tail": node_log[-1500:]}
