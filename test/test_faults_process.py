@@ -183,8 +183,9 @@ def test_publisher_killed_and_restarted(procs, tmp_path) -> None:
     assert received is not None, node.output()[-2000:]
     # a sample in flight at the kill may reach one subscriber and not the other
     assert (~early).sum() <= 1, lost[~early]
-    # the node received every recorded sample but the ones before it knew the publisher
-    assert abs(received - (len(states["stamp"]) - early.sum())) <= 1, (received, early.sum())
+    # the node received every recorded sample but the ones before it knew the publisher (it
+    # may have received more: the recorder, too, can match a new publisher late)
+    assert received >= len(states["stamp"]) - early.sum() - 1, (received, early.sum())
     kill_gap = np.diff(states["stamp"]).max() / 1e9
     markers = bag.info.topic_counts()["/movement"]
     th = relaxed_thresholds(tmp_path, loss_max=1)
