@@ -13,9 +13,13 @@ EXTRAS ?= test,reference,plots
 setup: $(VENV)/.installed browser
 
 # The HTML report's test opens it in Debian's chromium (no network needed); CI runs as root.
+# A second make test (or the hosts tier's nftables) installing at the same time waits for
+# this one (the same flock file as test/hostkit.py), and apt for any other apt's lock.
+APT_LOCKED = DEBIAN_FRONTEND=noninteractive flock -w 900 /tmp/forearm_dynamics-apt.lock
+APT_WAIT = -o DPkg::Lock::Timeout=600
 browser:
-	@command -v chromium >/dev/null || { test "$$(id -u)" = 0 && \
-	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
+	@command -v chromium >/dev/null || { test "$$(id -u)" = 0 && $(APT_LOCKED) sh -c \
+	  'apt-get $(APT_WAIT) update -qq && apt-get $(APT_WAIT) install -y -qq chromium >/dev/null'; } || \
 	  echo "warning: chromium is missing (test_html_report needs it): apt-get install chromium" >&2
 
 $(VENV)/.installed: setup.py setup.cfg .ci/requirements.lock

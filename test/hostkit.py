@@ -54,9 +54,13 @@ def ensure_nft() -> str:
     if path:
         return path
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    subprocess.run(["apt-get", "update", "-q"], check=False, capture_output=True, env=env, timeout=600)
-    subprocess.run(["apt-get", "install", "-y", "-q", "nftables"], check=True, capture_output=True,
-                   env=env, timeout=600)
+    # a concurrent make setup installing chromium holds apt's locks for minutes: wait for it
+    # (the Makefile's flock file), and for any other apt's lock
+    locked = ["flock", "-w", "900", "/tmp/forearm_dynamics-apt.lock", "apt-get", "-o",
+              "DPkg::Lock::Timeout=600"]
+    subprocess.run([*locked, "update", "-q"], check=False, capture_output=True, env=env, timeout=1800)
+    subprocess.run([*locked, "install", "-y", "-q", "nftables"], check=True, capture_output=True,
+                   env=env, timeout=1800)
     path = shutil.which("nft") or "/usr/sbin/nft"
     if not Path(path).exists():
         raise RuntimeError("nftables installed but nft not found")
