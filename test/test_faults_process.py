@@ -83,15 +83,20 @@ class Watch:
         assert self.peer.spin_until(lambda: len(self.torques) >= start + n, timeout), \
             f"only {len(self.torques) - start} of {n} torques"
 
-    def wait_recorded(self, path: Path, topic: str, after_ns: int, timeout: float = 30.0) -> bool:
-        """Spin until the recording in progress at path holds a message on topic logged after
-        after_ns (faultkit.recorded)."""
+    def _poll(self, check, timeout: float) -> bool:
+        """Spin in 0.5 s steps until check() (which reads a file being written: not on
+        every spin) is true; False after timeout."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             self.peer.spin_for(0.5)
-            if recorded(path, topic, after_ns):
+            if check():
                 return True
         return False
+
+    def wait_recorded(self, path: Path, topic: str, after_ns: int, timeout: float = 30.0) -> bool:
+        """Spin until the recording in progress at path holds a message on topic logged after
+        after_ns (faultkit.recorded)."""
+        return self._poll(lambda: recorded(path, topic, after_ns) > 0, timeout)
 
     def drain(self, path: Path, hang_s: float = 120.0) -> None:
         """After the publisher stopped: wait until the recording being written at path holds
@@ -101,13 +106,9 @@ class Watch:
         self.peer.spin_for(0.5)  # the last samples still in the watch's reader
         assert self.states, "the watch received no joint_states"
         last = max(self.states)
-        deadline = time.monotonic() + hang_s
-        while time.monotonic() < deadline:
-            self.peer.spin_for(0.5)
-            if last in self.torques and _answered(path, last):
-                return
-        raise AssertionError(f"no recorded answer to the last sample after {hang_s:.0f} s "
-                             f"(the watch {'has' if last in self.torques else 'lacks'} it)")
+        if not self._poll(lambda: last in self.torques and _answered(path, last), hang_s):
+            raise AssertionError(f"no recorded answer to the last sample after {hang_s:.0f} s "
+                                 f"(the watch {'has' if last in self.torques else 'lacks'} it)")
 
     def close(self) -> None:
         self.peer.close()
