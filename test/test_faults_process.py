@@ -322,11 +322,13 @@ def test_torque_node_killed_and_restarted(procs, tmp_path) -> None:
 # -- the recorder stopped at random points --------------------------------------------------
 def _recorder_plan(rng: random.Random) -> list[tuple[str, str, float]]:
     """(signal, phase, delay): start-up = as soon as the file exists; recording = a random
-    time after the recorder reported that it records; 'SIGINT x2' = a second SIGINT 2 ms on.
-    Recording windows last 3.5-5 s: a recorder joining a running graph may match a writer
-    only at Fast DDS's next discovery heartbeat (~3 s), so shorter windows may hold no
-    marker (check_bag then scores the file as a recording without markers) or no torque
-    (check_bag exits 2 with one line); both are checked."""
+    time after the recording being written holds its first torque; 'SIGINT x2' = a second
+    SIGINT 2 ms on. A recorder joining a running graph may match a writer only at Fast DDS's
+    next discovery heartbeat (~3 s, more at load): counted from its 'recording' line, two
+    of four 3.5-5 s windows held no torque at load 7 (a busy loop beside two runs of this
+    file), and the check that most stops during recording leave data for check_bag failed.
+    Windows of 3.5-5 s from the first torque may still hold no marker (check_bag then
+    scores the file as a recording without markers): that case is checked too."""
     plan = [(sig, phase, rng.uniform(3.5, 5.0) if phase == "recording" else 0.0)
             for sig in ("SIGKILL", "SIGTERM", "SIGINT") for phase in ("start-up", "recording")]
     return [*plan, ("SIGINT x2", "recording", rng.uniform(3.5, 5.0))]
@@ -396,12 +398,14 @@ def test_recorder_stopped_at_random_points(procs, tmp_path) -> None:
             _send(rec, sig)
         else:
             due[k] = None
-    deadline = time.monotonic() + 60
+    deadline, polled = time.monotonic() + 120, 0.0  # a hang guard
     while due:  # stop each at its random point
-        assert time.monotonic() < deadline, "recorders never started"
+        assert time.monotonic() < deadline, "recorders never recorded a torque"
+        poll = time.monotonic() >= polled + 0.25  # reading the files: not every 5 ms
+        polled = time.monotonic() if poll else polled
         for k in list(due):
-            rec, _path, sig, _phase, delay = started[k]
-            if due[k] is None and "recording" in rec.output():
+            rec, path, sig, _phase, delay = started[k]
+            if due[k] is None and poll and recorded(path, "/joint_torques") > 0:
                 due[k] = time.monotonic() + delay
             elif due[k] is not None and time.monotonic() >= due[k]:
                 _send(rec, sig)
