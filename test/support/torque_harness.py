@@ -36,8 +36,10 @@ class Diagnostics:
     def get(self, key: str, default: int = 0) -> int:
         return int(self.values.get(key, default))
 
-    def fresh(self, pred=lambda d: True, timeout: float = 10.0) -> dict[str, str]:
-        """The first values published from now on that satisfy pred."""
+    def fresh(self, pred=lambda d: True, timeout: float = rosproc.STARTUP_S) -> dict[str, str]:
+        """The first values published from now on that satisfy pred. timeout is a hang guard:
+        a node catching up a backlog on a loaded machine published none for over 10 s (a
+        restarted node 2.8 s behind, load 10)."""
         start = self.count
         ok = self._peer.spin_until(lambda: self.count > start and pred(self.values), timeout)
         assert ok, f"diagnostics never satisfied the check: {self.values}"
