@@ -217,7 +217,12 @@ def test_stamp_gap_resets_the_estimator(tn) -> None:
 def test_slow_streams_are_not_gaps(tn) -> None:
     """The adaptive max_stamp_gap (default 0): a 20 Hz then 5 Hz stream keeps its history
     (every sample after the first is a real estimate, exact for constant acceleration);
-    only the 0.5 s jump to the stream's first sample resets the estimator."""
+    only the 0.5 s jump to the stream's first sample resets the estimator (two samples 1 ms
+    apart first: the stream's step before that jump is 1 ms, whatever the tests before sent)."""
+    s1 = tn.stamp(500 * MS)
+    tn.t_ns = s1 + MS
+    zero = np.zeros(20)
+    assert len(tn.exchange([joint_state(s1, POSTURE, zero), joint_state(s1 + MS, POSTURE, zero)])) == 2
     before = int(tn.diag.fresh(lambda d: True)["reset.stamp_gap"])
     dt = np.array([50] * 5 + [200] * 5) * MS  # 20 Hz, then 5 Hz
     stamps, q, qd, a = constant_acceleration(10, dt, tn.stamp(500 * MS))

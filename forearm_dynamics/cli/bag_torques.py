@@ -69,8 +69,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="backward: low-pass on velocities estimated from positions (0 = off)")
     ap.add_argument("--cutoff", type=float, default=None, metavar="HZ",
                     help="zero_phase: low-pass cutoff (default config/analysis.yaml, 6 Hz)")
-    ap.add_argument("--max-stamp-gap", type=float, default=0.1, metavar="S",
-                    help="stamp steps beyond this restart the estimator (the node's max_stamp_gap)")
+    ap.add_argument("--max-stamp-gap", type=float, default=0.0, metavar="S",
+                    help="stamp steps beyond this restart the estimator (the node's max_stamp_gap; "
+                         "0, the default, = the node's adaptive rule: 0.1 s and 5 x the stream's "
+                         "step)")
     ap.add_argument("--input-topic", default="joint_states")
     ap.add_argument("--topic", default="joint_torques", help="output topic")
     ap.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")

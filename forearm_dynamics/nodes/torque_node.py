@@ -50,6 +50,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from ..estimation.stamps import MIN_SUPPORTED_RATE_HZ, rate_note
 from ..model_config import config_message
 from ..version import package_version
 from . import validation as v
@@ -377,8 +378,22 @@ class TorqueNode(JointStreamNode):
         """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None)."""
         self.config_pub.publish(String(data=self.live.config_text(b, applies_from)))
 
+    def on_first_step(self, d_ns: int) -> None:
+        """The input's rate is known: one line if it is below the supported rates."""
+        note = rate_note(d_ns * 1e-9)
+        if note is not None:
+            self.get_logger().warning(note)
+
     def diagnostic_values(self, status) -> dict[str, str]:
         b = self.live.in_use
+        dt = self.stamp_rule.interval_ns * 1e-9
+        rate = {"stamp_rate_hz": f"{1.0 / dt:.3g}" if dt > 0 else "unknown",
+                "rate_supported": "unknown" if dt <= 0 else
+                ("yes" if rate_note(dt) is None else f"no: below {MIN_SUPPORTED_RATE_HZ:g} Hz")}
+        if dt > 0 and rate_note(dt) is not None and status.level == status.OK:
+            status.level = status.WARN
+            status.message = (f"input at {1.0 / dt:.3g} Hz: below the rates the estimator is "
+                              f"measured at ({MIN_SUPPORTED_RATE_HZ:g} Hz to 1 kHz)")
         desc = b.estimator.describe(self.sample_interval_s(), self._velocity_given)
         extra = {
             "config_id": str(b.config_id),
@@ -389,6 +404,7 @@ class TorqueNode(JointStreamNode):
             "missing_joints": self.missing_joints,
             "held_joints": ", ".join(self.held_joints) or "none",
             **{f"live_changes.{k}": str(n) for k, n in self.live.counts().items()},
+            **rate,
         }
         if self.output_rate_hz > 0:
             extra.update({f"timer_skipped.{k}": str(n) for k, n in self.timer_skipped.items()})

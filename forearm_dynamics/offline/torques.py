@@ -1,8 +1,12 @@
 """bag_torques' work: joint torques for every joint_states sample of a bag, in batch.
 
-The samples go through the torque node's stamp rules (stream_node.py): a stamp that does
-not increase by more than `max_stamp_gap` backwards is dropped (counted), a step larger
-than `max_stamp_gap` either way starts a new segment (the estimator warms up again).
+The samples go through the torque node's stamp rule (estimation/stamps.py, one rule for
+both; `max_stamp_gap` 0 = adaptive, the node's default): a stamp that does not increase is
+dropped (counted), a gap or a jump back starts a new segment (the estimator warms up
+again). With a delay (kalman `delay_s`), each estimate is stamped with the sample it
+estimates, as the node stamps it (the first version stamped it with the newest sample's
+stamp: 50 ms misaligned at delay_s 0.05, and 3+ rows at the zero posture before the first
+estimate; issue 29).
 Estimators: any of the torque node's (estimation.ESTIMATORS, default the node's default):
 the same update() calls the node makes, sample by sample, so the same numbers as a
 torque_node given the same stream ('backward' through estimation/offline.backward_batch,
@@ -40,7 +44,8 @@ from ..dynamics import ArmModel
 from ..errors import ForeignBag, OutputExists, UsageError
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..estimation import ESTIMATORS as NODE_ESTIMATORS
-from ..estimation.offline import backward_batch, segments, zero_phase
+from ..estimation.offline import backward_batch, zero_phase
+from ..estimation.stamps import StampRule, resets
 from ..filtering import analysis_config
 from ..uncertainty import NoCovariance, TorqueStd
 from ..version import package_version
@@ -66,29 +71,33 @@ class OfflineResult:
     std_config: dict = field(default_factory=lambda: {"published": False, "why": "not asked for"})
 
 
-def stamp_rules(stamps_ns: np.ndarray, max_gap_ns: int) -> np.ndarray:
-    """Mask of the samples a torque node keeps: zero stamps and stamps that do not advance
-    (within max_gap backwards: duplicates, reordering) are dropped; larger jumps are kept."""
-    s = np.asarray(stamps_ns, np.int64)
-    keep = s > 0
-    d = np.diff(s)
-    if keep.all() and (d > 0).all():
-        return keep
-    last = None
-    for i in range(len(s)):
-        if not keep[i]:
-            continue
-        if last is not None and -max_gap_ns <= s[i] - last <= 0:
-            keep[i] = False
-            continue
-        last = s[i]
-    return keep
+def _segments(reset: np.ndarray) -> list[slice]:
+    """Runs of samples between two restarts of the estimator (reset flags, the first True)."""
+    starts = np.flatnonzero(reset).tolist()
+    return [slice(a, b) for a, b in zip(starts, [*starts[1:], len(reset)], strict=True)]
+
+
+def _batch(fn, t: np.ndarray, reset: np.ndarray, *arrays):
+    """A batch estimator (zero_phase, backward_batch) run per segment of the stamp rule, so
+    that it restarts where the node's estimator does (estimation/stamps.py)."""
+    whole = np.iinfo(np.int64).max  # one segment per call: the rule has cut them already
+    parts = [fn(t[seg], *(None if a is None else a[seg] for a in arrays), whole)
+             for seg in _segments(reset)]
+    return tuple(np.concatenate([p[i] for p in parts]) for i in range(len(parts[0])))
 
 
 def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMATOR,
-            settings: dict | None = None, max_gap_s: float = 0.1,
+            settings: dict | None = None, max_gap_s: float = 0.0,
             cutoff_hz: float | None = None, std: bool = True, subject: str = "none") -> OfflineResult:
     """Torques of every kept sample; BagError when a joint of the model is never given.
+
+    The samples go through the node's stamp rule (estimation/stamps.py; max_gap_s 0 =
+    adaptive, the node's default) and the estimator's update() calls as the node makes
+    them. With a delay (kalman delay_s > 0) each estimate is the row of the sample it
+    estimates (its stamp, its frame_id) and carries the log time of the input that released
+    it, as a recorder of the node would log it; the last delay_s of the recording, which
+    the node outputs only when later samples come, are drained at the end (every kept
+    sample gets exactly one row; no row is made up).
 
     std: also the σ of every torque (uncertainty.TorqueStd, the node's publish_std: same
     numbers, inf while the estimate warms up) when the estimator carries a covariance;
@@ -100,16 +109,18 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
     if missing:
         raise ForeignBag(f"{stream.topic} has no position for {', '.join(missing[:4])}"
                        f"{' ...' if len(missing) > 4 else ''}: not this model's joints")
-    gap = round(max_gap_s * 1e9)
-    keep = stamp_rules(stream.stamp_ns, gap)
     finite = np.isfinite(stream.position).all(axis=1)
     warnings = []
     if not finite.all():
         warnings.append(f"{int((~finite).sum())} samples without a finite position for every "
                         "joint dropped (as the node rejects them)")
-    keep &= finite
-    dropped = int((~keep).sum())
-    idx = np.flatnonzero(keep)
+    # the node checks a sample's values before its stamp: a refused sample never moves the rule
+    idx = np.flatnonzero(finite)
+    keep, reset = resets(stream.stamp_ns[idx], max_gap_s)
+    keep = np.array(keep, bool)
+    reset = np.array(reset, bool)[keep]
+    idx = idx[keep]
+    dropped = len(stream.stamp_ns) - len(idx)
     t, q = stream.stamp_ns[idx], stream.position[idx]
     has_v = stream.has_velocity[idx]
     start = time.perf_counter()
@@ -117,38 +128,67 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
     if std and estimator in ("zero_phase", "backward"):
         std_config = {"published": False, "why": f"estimator {estimator!r} carries no covariance: "
                       "no torque σ (use estimator kalman)"}
-    if estimator == "zero_phase":
-        q, qd, qdd = zero_phase(t, q, cutoff_hz, gap)
+    rows = np.arange(len(t))  # the sample each output row estimates
+    release = rows  # the input whose arrival released it (its log time)
+    if not len(t):
+        qd = qdd = np.zeros_like(q)
+    elif estimator == "zero_phase":
+        q, qd, qdd = _batch(lambda ts, x, g: zero_phase(ts, x, cutoff_hz, g), t, reset, q)
     elif estimator == "backward" and (has_v.all() or not has_v.any()):
-        qd, qdd, _warm = backward_batch(t, q, stream.velocity[idx] if has_v.all() else None, settings, gap)
+        vel = stream.velocity[idx] if has_v.all() else None
+        qd, qdd, _warm = _batch(lambda ts, x, v, g: backward_batch(ts, x, v, settings, g), t, reset, q, vel)
     else:  # the estimator sample by sample, as the node: q and qd as it estimates them
-        est = make_estimator(estimator, arm.nv, settings or {})
-        ts = None
-        if std:
-            try:
-                ts = TorqueStd(arm, est, subject=subject)
-            except NoCovariance as exc:
-                std_config = {"published": False, "why": str(exc)}
-            else:
-                std_config = {"published": True, **ts.parts()}
-        q, qd, qdd = q.copy(), np.zeros_like(q), np.zeros_like(q)
-        std_out = np.full_like(q, np.inf) if ts is not None else None
-        last = None
-        for k in range(len(t)):
-            if last is not None and not 0 < t[k] - last <= gap:
-                est.reset()
-                if ts is not None:
-                    ts.reset()
-            last = t[k]
-            vel = bool(has_v[k])
-            warm = est.update(int(t[k]), q[k], stream.velocity[idx[k]] if vel else None)
-            q[k], qd[k], qdd[k] = est.q, est.qd, est.qdd
-            if ts is not None and ts.update(int(t[k]), vel) and warm:
-                std_out[k] = ts.std
+        q, qd, qdd, std_out, std_config, rows, release = _sample_by_sample(
+            stream, idx, reset, arm, estimator, settings, std, subject, std_config)
     tau = arm.inverse_dynamics_batch(q, qd, qdd)
     elapsed = time.perf_counter() - start
-    return OfflineResult(t, stream.log_ns[idx], [stream.frame_ids[i] for i in idx], q, qd, qdd, tau,
-                         dropped, len(segments(t, gap)), warnings, elapsed, std_out, std_config)
+    return OfflineResult(t[rows], stream.log_ns[idx[release]], [stream.frame_ids[idx[i]] for i in rows],
+                         q, qd, qdd, tau, dropped, int(reset.sum()), warnings, elapsed, std_out, std_config)
+
+
+def _sample_by_sample(stream: JointSeries, idx: np.ndarray, reset: np.ndarray, arm: ArmModel,
+                      estimator: str, settings: dict | None, std: bool, subject: str, std_config: dict):
+    """The node's compute(): reset where the stamp rule says, update, output the estimate
+    of est.stamp_ns (torque_node.compute and after_output, call for call)."""
+    t, qin = stream.stamp_ns[idx], stream.position[idx]
+    has_v = stream.has_velocity[idx]
+    n_s = len(t)
+    est = make_estimator(estimator, arm.nv, settings or {})
+    ts = None
+    if std:
+        try:
+            ts = TorqueStd(arm, est, subject=subject)
+        except NoCovariance as exc:
+            std_config = {"published": False, "why": str(exc)}
+        else:
+            std_config = {"published": True, **ts.parts()}
+    row_of = {int(x): k for k, x in enumerate(t)}
+    out = np.zeros((3, n_s, arm.nv))
+    std_out = np.full((n_s, arm.nv), np.inf) if ts is not None else None
+    done = np.zeros(n_s, bool)
+    release = np.zeros(n_s, np.int64)
+    for k in range(n_s):
+        if reset[k]:
+            est.reset()
+            if ts is not None:
+                ts.reset()
+        vel = bool(has_v[k])
+        warm = est.update(int(t[k]), qin[k], stream.velocity[idx[k]] if vel else None)
+        stamp = est.stamp_ns
+        if stamp is None:  # the first delay_s of a segment: output later
+            continue
+        i = k if stamp == t[k] else row_of[stamp]
+        out[0, i], out[1, i], out[2, i] = est.q, est.qd, est.qdd
+        done[i], release[i] = True, k
+        if ts is not None and ts.update(stamp, vel) and warm:
+            std_out[i] = ts.std
+    for stamp, x in est.drain():  # the end of the recording: the node would output these later
+        i = row_of[stamp]
+        out[:, i] = x
+        done[i], release[i] = True, n_s - 1
+    rows = np.flatnonzero(done)
+    return (out[0, rows], out[1, rows], out[2, rows],
+            None if std_out is None else std_out[rows], std_config, rows, release[rows])
 
 
 def config_message(arm: ArmModel, estimator: str, settings: dict | None, src: Path,
@@ -238,7 +278,7 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
 
 def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT_ESTIMATOR,
                 settings: dict | None = None, input_topic: str = "joint_states",
-                output_topic: str = "joint_torques", max_gap_s: float = 0.1,
+                output_topic: str = "joint_torques", max_gap_s: float = 0.0,
                 cutoff_hz: float | None = None, overwrite: bool = False,
                 std: bool = True, subject: str = "none") -> tuple[OfflineResult, dict]:
     src, dst = Path(src), Path(dst)
@@ -256,7 +296,7 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT
         ns = stream.topic.rsplit("/", 1)[0]
         output_topic, cfg_topic = f"{ns}/{output_topic}", f"{ns}/{cfg_topic}"
     steps = np.diff(res.stamps_ns)
-    steps = steps[(steps > 0) & (steps <= max_gap_s * 1e9)]  # within segments
+    steps = steps[(steps > 0) & (steps <= StampRule(max_gap_s).gap_ns())]  # within segments
     dt_s = float(np.median(steps)) * 1e-9 if len(steps) else 1e-3
     velocity_given = bool(len(stream.has_velocity)) and bool(stream.has_velocity.all())
     config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s,
