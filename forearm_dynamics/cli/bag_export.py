@@ -7,8 +7,11 @@ One row per joint_torques message, in stamp order. Columns: `time` (s; for a bag
 mot_to_bag the source file's own time, else from the first stamp), `stamp_ns` (CSV only),
 `<joint>_moment` (N·m) per joint, and with --states `<joint>` (rad) and `<joint>_speed`
 (rad/s): the state the torques were computed for; when the bag has `<topic>_std` (the
-torque σ: torque_node publish_std, bag_torques), `<joint>_moment_std` (N·m, 1σ; inf while
-the estimate warms up, NaN where no σ of that stamp) unless --no-std. `.sto` is what OpenSim's Inverse
+torque σ: torque_node publish_std, bag_torques), `<joint>_moment_std` (N·m, 1σ) unless
+--no-std. A value that is not known (the σ while the estimate warms up, inf on the topic; no
+σ message of that stamp) is `NaN` in a .sto and an empty cell in CSV, never `inf`; the .sto
+header says so (`note_std=`), as it says `truncated=` for a cut bag (its complete chunks
+are exported; the summary line says "truncated" too). `.sto` is what OpenSim's Inverse
 Dynamics tool writes (header, `inDegrees=no`, `endheader`, tab-separated), readable by
 OpenSim's tools; `--names opensim` labels columns with the MoBL-ARMS/ARMS coordinate names
 of config/opensim_coordinates.yaml (moments and states in the OpenSim coordinate's sign).
@@ -101,16 +104,32 @@ def run(args: argparse.Namespace) -> int:
         labels += names + [f"{n}_speed" for n in names]
         cols += [s.position[order] * signs, s.velocity[order] * signs]
     std_topic = s.topic.rstrip("/") + "_std"
+    notes: dict[str, str] = {}
+    unknown = 0
     if args.std and bag.info.find_topic(std_topic) is not None:
         labels += [f"{n}_moment_std" for n in names]
-        cols.append(_std_columns(bag, std_topic, stamps))
+        sd = _std_columns(bag, std_topic, stamps)
+        cols.append(sd)
+        unknown = int((~np.isfinite(sd)).any(axis=1).sum())
+        if unknown:
+            notes["note_std"] = (f"NaN in a _moment_std column: no torque sigma known for that row "
+                                 f"({unknown} rows: the estimate warming up, or no sigma message of "
+                                 "that stamp)")
+    truncated = not bag.info.complete
+    if truncated:
+        notes["truncated"] = (f"yes: {args.bag.name} was cut ({bag.info.problem}); the rows of its "
+                              f"{bag.info.message_count} messages in complete chunks")
     data = np.hstack(cols)
     if args.format == "csv":
         write_table(out, "", labels, t, data, sep=",", opensim=False, stamps_ns=stamps)
     else:
-        write_table(out, "Inverse Dynamics Generalized Forces (forearm_dynamics bag_export)", labels, t, data)
-    print(f"{PROG}: {len(stamps)} rows of {s.topic} ({len(labels)} columns) -> {out}")
-    if not bag.info.complete:
+        write_table(out, "Inverse Dynamics Generalized Forces (forearm_dynamics bag_export)", labels, t, data,
+                    notes=notes)
+    empty = "empty" if args.format == "csv" else "NaN"
+    print(f"{PROG}: {len(stamps)} rows of {s.topic} ({len(labels)} columns) -> {out}"
+          + (f"; {unknown} rows without a known σ ({empty} cells: warming up)" if unknown else "")
+          + (" (truncated input: its complete chunks only)" if truncated else ""))
+    if truncated:
         print(f"{PROG}: warning: {args.bag} is truncated ({bag.info.problem}); exported its complete chunks",
               file=sys.stderr)
     return OK

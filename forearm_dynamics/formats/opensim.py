@@ -224,20 +224,30 @@ def map_motion(m: Motion, cmap: CoordinateMap) -> MappedMotion:
 
 def write_table(path: str | os.PathLike, title: str, labels: list[str], time: np.ndarray,
                 data: np.ndarray, *, sep: str = "\t", opensim: bool = True,
-                stamps_ns: np.ndarray | None = None) -> None:
+                stamps_ns: np.ndarray | None = None, notes: dict[str, str] | None = None) -> None:
     """An OpenSim-readable table (header, endheader, labels, rows) or, opensim=False, CSV.
     Values are written with repr (shortest exact float text); `stamps_ns`, if given, as an
-    integer column `stamp_ns` after time."""
+    integer column `stamp_ns` after time. A value that is not finite (a σ not known while
+    the estimate warms up is inf on the topic) is written `NaN` in a table, an empty cell in
+    CSV (what OpenSim and CSV readers take for missing), never `inf`. `notes` {key: text}:
+    header lines `key=text` of a table (OpenSim keeps them as metadata); CSV has no header
+    but its column labels (the caller says them)."""
     path = Path(path)
     head = ["time", *(["stamp_ns"] if stamps_ns is not None else []), *labels]
+    missing = "NaN" if opensim else ""
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
         if opensim:
+            extra = "".join(f"{k}={' '.join(v.split())}\n" for k, v in (notes or {}).items())
             fh.write(f"{title}\nversion=1\nnRows={len(time)}\nnColumns={len(head)}\n"
-                     "inDegrees=no\nendheader\n")
+                     f"inDegrees=no\n{extra}endheader\n")
         fh.write(sep.join(head) + "\n")
+        finite = np.isfinite(data)
         for k in range(len(time)):
             cells = [repr(float(time[k]))]
             if stamps_ns is not None:
                 cells.append(str(int(stamps_ns[k])))
-            cells += [repr(float(x)) for x in data[k]]
+            if finite[k].all():
+                cells += [repr(float(x)) for x in data[k]]
+            else:
+                cells += [repr(float(x)) if ok else missing for x, ok in zip(data[k], finite[k], strict=True)]
             fh.write(sep.join(cells) + "\n")

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..analysis.errors import rmse
 from ..estimation.offline import zero_phase
-from ..filtering import analysis_config
+from ..filtering import analysis_config, usable_cutoff
 from ..model_config import ModelChoice
 from .delivery import Delivery, delivery, old_stamps_note
 from .recording import Recording
@@ -106,7 +106,13 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
         warnings.append(f"only {len(s_t)} usable joint_states: no reference computed")
         report.failures = _verdicts(report, th)
         return report
-    gap = max(int(10 * np.median(np.diff(s_t))), 100_000_000)
+    step = float(np.median(np.diff(s_t)))
+    gap = max(int(10 * step), 100_000_000)
+    # a cutoff this bag's rate can use (a 10 Hz bag: not the practice's 6 Hz), said when changed
+    cutoff, note = usable_cutoff(1e9 / step, cutoff_hz)
+    report.cutoff_hz = cutoff
+    if note is not None:
+        warnings.append(note)
     q, qd, qdd = zero_phase(s_t, s_q, cutoff, gap)
     ref = arm.inverse_dynamics_batch(q, qd, qdd)
     t_u, it = np.unique(torques.stamp_ns, return_index=True)

@@ -46,9 +46,13 @@ from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, zero_phase
 from ..estimation.stamps import StampRule, resets
-from ..filtering import analysis_config
+from ..filtering import analysis_config, usable_cutoff
 from ..uncertainty import NoCovariance, TorqueStd
 from ..version import package_version
+
+#: Log time per chunk of the output (s): a cut file keeps all but the last CHUNK_SPAN_S
+#: before the cut.
+CHUNK_SPAN_S = 0.5
 
 #: The node's estimators, then the offline zero-phase one.
 ESTIMATORS = (*NODE_ESTIMATORS, "zero_phase")
@@ -69,6 +73,7 @@ class OfflineResult:
     compute_s: float = 0.0
     std: np.ndarray | None = None  # (N, n) 1σ per torque (inf while warming up), as the node's
     std_config: dict = field(default_factory=lambda: {"published": False, "why": "not asked for"})
+    cutoff_hz: float | None = None  # zero_phase: the cutoff used (None: the practice's)
 
 
 def _segments(reset: np.ndarray) -> list[slice]:
@@ -133,6 +138,11 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
     if not len(t):
         qd = qdd = np.zeros_like(q)
     elif estimator == "zero_phase":
+        steps = np.diff(t)[~reset[1:]]
+        if len(steps):  # a cutoff the stream's rate can use (check_bag's choice), said when changed
+            cutoff_hz, note = usable_cutoff(1e9 / float(np.median(steps)), cutoff_hz)
+            if note is not None:
+                warnings.append(note)
         q, qd, qdd = _batch(lambda ts, x, g: zero_phase(ts, x, cutoff_hz, g), t, reset, q)
     elif estimator == "backward" and (has_v.all() or not has_v.any()):
         vel = stream.velocity[idx] if has_v.all() else None
@@ -143,7 +153,8 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
     tau = arm.inverse_dynamics_batch(q, qd, qdd)
     elapsed = time.perf_counter() - start
     return OfflineResult(t[rows], stream.log_ns[idx[release]], [stream.frame_ids[idx[i]] for i in rows],
-                         q, qd, qdd, tau, dropped, int(reset.sum()), warnings, elapsed, std_out, std_config)
+                         q, qd, qdd, tau, dropped, int(reset.sum()), warnings, elapsed, std_out, std_config,
+                         cutoff_hz)
 
 
 def _sample_by_sample(stream: JointSeries, idx: np.ndarray, reset: np.ndarray, arm: ArmModel,
@@ -223,7 +234,10 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
         if (ch := info.find_topic(topic)) is not None:
             raise OutputExists(f"{src} already has {ch.topic}; choose another with --topic "
                            f"(e.g. {output_topic}_offline)")
-    writer = BagWriter(dst, overwrite=overwrite, custom_data=custom_data(info.metadata))
+    # chunks of 0.5 s of log time: written in a fraction of a second, the file would otherwise
+    # hold ~1 MiB chunks (seconds of recording each) and a cut file lose them (bag/writer.py)
+    writer = BagWriter(dst, overwrite=overwrite, custom_data=custom_data(info.metadata),
+                       chunk_span_s=CHUNK_SPAN_S)
     try:
         ids = copy_layout(info, writer)
         out = writer.add_topic("/" + output_topic.strip("/"), "sensor_msgs/msg/JointState",
@@ -300,7 +314,7 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT
     dt_s = float(np.median(steps)) * 1e-9 if len(steps) else 1e-3
     velocity_given = bool(len(stream.has_velocity)) and bool(stream.has_velocity.all())
     config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s,
-                            cutoff_hz, dt_s, velocity_given)
+                            res.cutoff_hz, dt_s, velocity_given)
     config["std"] = dict(res.std_config)
     if res.std is not None:
         config["std"]["topic"] = output_topic.rstrip("/") + "_std"
