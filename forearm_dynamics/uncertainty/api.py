@@ -72,7 +72,8 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
     warm = np.zeros(N, bool)
     known = np.zeros(N, bool)
     vel = qd is not None
-    _keep, reset = resets(t_ns, max_gap_s)  # the node's stamp rule (estimation/stamps.py)
+    # the node's stamp rule (estimation/stamps.py) on the steps (times here may be <= 0)
+    _keep, reset = resets(t_ns - t_ns[0] + 1 if N else t_ns, max_gap_s)
     row = {int(x): k for k, x in enumerate(t_ns)}
     for k in range(N):
         if reset[k]:
