@@ -59,6 +59,8 @@ def test_chunks_hold_half_a_second(made) -> None:
     with open(out, "rb") as fh:
         chunks = make_reader(fh).get_summary().chunk_indexes
     spans = [c.message_end_time - c.message_start_time for c in chunks]
+    print(f"{out.stat().st_size} bytes, {len(chunks)} chunks, log-time span per chunk max "
+          f"{max(spans) / 1e9:.3f} s")
     assert len(chunks) >= 25 and max(spans) < 500 * MS, (len(chunks), max(spans))
 
 
@@ -87,6 +89,8 @@ def test_a_cut_file_keeps_all_but_its_last_second(made, tmp_path) -> None:
         # the newest message the file had begun to hold at the cut
         started = max(c.message_end_time for c in chunks if c.chunk_start_offset < cut)
         kept = max(ref[s][0] for s in stamps)
+        print(f"cut at byte {cut}: {len(stamps)} of {len(order)} torques kept, "
+              f"{(started - kept) / 1e9:.3f} s before the cut lost")
         assert started - kept <= SPAN_NS, (i, (started - kept) / 1e9)
         rec = tmp_path / f"rec{i}.mcap"
         recover(cut_path, rec)

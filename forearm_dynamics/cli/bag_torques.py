@@ -11,7 +11,10 @@ model and estimator (so `check_bag OUT` rebuilds the same model). The torque nod
 estimators (default: the node's default) give the same numbers as the node given the same
 stream; `--setting NAME=VALUE` sets one of the estimator's settings (the node's
 `estimator.NAME`). 'zero_phase' is the offline practice (6 Hz forward-backward low-pass,
-derivatives of the filtered positions).
+derivatives of the filtered positions). With a delay (`--setting delay_s=0.05`) each
+estimate is stamped with the sample it estimates, as the node stamps it; every sample gets
+one row (the last delay_s at the end). The stamp rule is the node's (--max-stamp-gap 0:
+adaptive). OUT's chunks hold 0.5 s of log time each: a cut OUT keeps all but its last second.
 Exit codes: 0 written; 2 bad arguments or an input that cannot be used (one line).
 """
 
