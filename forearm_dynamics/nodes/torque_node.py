@@ -390,7 +390,8 @@ class TorqueNode(JointStreamNode):
         rate = {"stamp_rate_hz": f"{1.0 / dt:.3g}" if dt > 0 else "unknown",
                 "rate_supported": "unknown" if dt <= 0 else
                 ("yes" if rate_note(dt) is None else f"no: below {MIN_SUPPORTED_RATE_HZ:g} Hz")}
-        if dt > 0 and rate_note(dt) is not None and status.level == status.OK:
+        if dt > 0 and rate_note(dt) is not None and status.level == status.OK \
+                and status.message != "no input":  # a stream's last step may be its pause
             status.level = status.WARN
             status.message = (f"input at {1.0 / dt:.3g} Hz: below the rates the estimator is "
                               f"measured at ({MIN_SUPPORTED_RATE_HZ:g} Hz to 1 kHz)")
