@@ -135,7 +135,9 @@ def run(args: argparse.Namespace) -> int:
           f"{sum(counts.values())} messages to {args.output}")
     if res.std is not None:
         warming = int(np.isinf(res.std).any(axis=1).sum())
-        print(f"{PROG}: {args.topic.rstrip('/')}_std: 1σ per torque ({warming} samples warming up: inf)")
+        delayed = settings.get("delay_s", 0.0) > 0
+        print(f"{PROG}: {args.topic.rstrip('/')}_std: 1σ per torque ({warming} samples without a "
+              f"known σ: inf; warming up{', or the last delay_s output at the end' if delayed else ''})")
     elif args.std:
         print(f"{PROG}: no {args.topic.rstrip('/')}_std: {res.std_config['why']}")
     return OK
