@@ -134,7 +134,9 @@ def test_check_bag_on_a_10hz_bag_picks_a_cutoff_and_says_which(tmp_path) -> None
     """The first version exited 2 on a filter-cutoff error (6 Hz above the 5 Hz Nyquist)."""
     src, out = tmp_path / "slow.mcap", tmp_path / "slow_tq.mcap"
     write_stream_bag(src, 120, period_ns=100 * MS)
-    assert run("bag_torques", src, out).returncode == 0
+    r = run("bag_torques", src, out)
+    assert r.returncode == 0 and "input at 10 Hz (stamp step 100.0 ms) is below the rates" in r.stderr, \
+        r.stderr
     r = run("check_bag", out)
     assert r.returncode in (0, 1), r.stdout + r.stderr
     assert "low-passed at 4 Hz" in r.stdout and "Traceback" not in r.stderr, r.stdout

@@ -45,7 +45,7 @@ from ..errors import ForeignBag, OutputExists, UsageError
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, zero_phase
-from ..estimation.stamps import StampRule, resets
+from ..estimation.stamps import StampRule, rate_note, resets
 from ..filtering import analysis_config, usable_cutoff
 from ..uncertainty import NoCovariance, TorqueStd
 from ..version import package_version
@@ -312,6 +312,9 @@ def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT
     steps = np.diff(res.stamps_ns)
     steps = steps[(steps > 0) & (steps <= StampRule(max_gap_s).gap_ns())]  # within segments
     dt_s = float(np.median(steps)) * 1e-9 if len(steps) else 1e-3
+    note = rate_note(dt_s) if len(steps) and estimator != "zero_phase" else None
+    if note is not None:  # what the node says at the stream's first step
+        res.warnings.append(note)
     velocity_given = bool(len(stream.has_velocity)) and bool(stream.has_velocity.all())
     config = config_message(arm, estimator, settings, src, stream.topic, output_topic, max_gap_s,
                             res.cutoff_hz, dt_s, velocity_given)
