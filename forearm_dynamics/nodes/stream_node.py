@@ -77,8 +77,6 @@ NODE_CONFIG_TOPIC = "~/config"
 RESERVED_TOPICS = {"/diagnostics": "diagnostics topic", NODE_CONFIG_TOPIC: "node's config topic",
                    CONFIG_TOPIC: "torque_node's config topic"}
 
-#: Adaptive max_stamp_gap (max_stamp_gap = 0): the rule of estimation/stamps.py.
-
 STREAM_SPECS = (
     Spec("input_topic", "joint_states", "JointState input topic (remappable too)"),
     Spec("output_topic", "joint_torques", "JointState output topic, model joint order"),
