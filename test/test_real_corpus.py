@@ -151,7 +151,7 @@ def _results() -> dict:
 def test_docs_tables_are_the_committed_benchmark_output() -> None:
     import real_corpus
 
-    for path, text in real_corpus.docs_blocks(_results()).items():
+    for path, text in real_corpus.docs_parts(_results()):
         doc = (ROOT / path).read_text(encoding="utf-8")
         assert text in doc, f"{path}: the real-corpus table differs from benchmarks/real_corpus.json; " \
                             "run python benchmarks/real_corpus.py --docs"
@@ -164,5 +164,5 @@ def test_docs_check_fails_when_a_number_differs() -> None:
     changed = copy.deepcopy(res)
     s = changed["summary"]["held_out"]["estimators"]["kalman"]["settled"]["ratio"]
     s["median"] += 0.01
-    old, new = real_corpus.docs_blocks(res), real_corpus.docs_blocks(changed)
-    assert all(old[p] != new[p] for p in old)
+    old, new = real_corpus.docs_parts(res), real_corpus.docs_parts(changed)
+    assert all(a != b for (_, a), (_, b) in zip(old, new, strict=True))
