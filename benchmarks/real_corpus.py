@@ -216,6 +216,13 @@ def summary(recs: list[dict]) -> dict:
             cov[j] = {"inside_1p96": inside / n if n else None, "rms_std_over_rmse": rms, "samples": n,
                       "recording_min_inside": min(per_rec) if per_rec else None}
         h["sigma_coverage"] = cov
+        h["per_source"] = {}
+        for src in h["sources"]:
+            sr = [r for r in rs if r["source"] == src]
+            h["per_source"][src] = {
+                label: {win: _stats([r["estimators"][label][f"ratio_{win}"][j]
+                                     for r in sr for j in r["joints"]])
+                        for win in ("settled", "first_second")} for label in ESTIMATORS}
         out[half] = h
     return out
 
@@ -305,6 +312,18 @@ def docs_table(res: dict) -> str:
                        f"{100 * nr['median']:.1f} / {100 * nr['worst']:.1f} | "
                        f"{_x(f['ratio']['median'])} / {_x(f['ratio']['worst'])} | "
                        f"{100 * f['nrmse']['median']:.1f} |")
+    out += ["", ("| half | source | estimator | × Butterworth settled, median / worst | first second, "
+                 "median / worst |"), "|---|---|---|---|---|"]
+    for half in ("held_out", "tuning"):
+        h = res["summary"].get(half)
+        if h is None:
+            continue
+        for src, per in h["per_source"].items():
+            for label in ("kalman", "kalman_delay_0.05"):
+                st, fs = per[label]["settled"], per[label]["first_second"]
+                out.append(f"| {half.replace('_', '-')} | {src} ({st['n']} series) | {label} | "
+                           f"{_x(st['median'])} / {_x(st['worst'])} | "
+                           f"{_x(fs['median'])} / {_x(fs['worst'])} |")
     out += ["", "| half | DOF | inside ±1.96σ (pooled) | worst recording | RMS(σ) / RMSE |",
             "|---|---|---|---|---|"]
     for half in ("held_out", "tuning"):
@@ -404,13 +423,20 @@ def main(argv=None) -> int:
     ap.add_argument("--figure", type=Path, default=HERE / "real_corpus.png")
     ap.add_argument("--table", action="store_true", help="print the docs tables from --out")
     ap.add_argument("--docs", action="store_true", help="rewrite README/docs blocks from --out")
+    ap.add_argument("--resummarise", action="store_true",
+                    help="recompute the summary of --out from its recordings (no benchmark run)")
     args = ap.parse_args(argv)
+    if args.resummarise:
+        res = json.loads(args.out.read_text(encoding="utf-8"))
+        res["summary"] = summary(res["recordings"])
+        args.out.write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
     if args.table or args.docs:
         res = json.loads(args.out.read_text(encoding="utf-8"))
         if args.docs:
             print("rewrote: " + (", ".join(rewrite_docs(res)) or "nothing (up to date)"))
         else:
-            print(readme_rows(res) + "\n\n" + docs_table(res))
+            rows = readme_rows(res) if "held_out" in res["summary"] else "(no held-out half in --out)"
+            print(rows + "\n\n" + docs_table(res))
         return 0
     res = run(args)
     tmp = args.out.with_suffix(".tmp")
