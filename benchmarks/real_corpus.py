@@ -263,8 +263,10 @@ def _x(v) -> str:
 ROW_PREFIX = "| real arm movements"
 
 
-def _what(h: dict) -> str:
-    return (f"real arm movements, raw mocap 60–100 Hz (held-out half: {h['recordings']} recordings, "
+def _what(h: dict, res: dict) -> str:
+    rates = sorted({round(r["rate_hz"]) for r in res["recordings"] if r["half"] == "held_out"})
+    rate = f"{rates[0]}–{rates[-1]}" if len(rates) > 1 else f"{rates[0]}"
+    return (f"real arm movements, raw mocap {rate} Hz (held-out half: {h['recordings']} recordings, "
             f"{len(h['sources'])} sources)")
 
 
@@ -276,7 +278,7 @@ def _cell(s: dict) -> str:
 def readme_rows(res: dict) -> str:
     """README's sensor table: its first rows, the real corpus's held-out half (settled)."""
     h = res["summary"]["held_out"]
-    return "\n".join(f"| {_what(h)} | {est} | "
+    return "\n".join(f"| {_what(h, res)} | {est} | "
                      f"{_cell(h['estimators'][label]['settled'])} |" for label, est in DOCS_ROWS[:2])
 
 
@@ -286,7 +288,7 @@ def estimation_rows(res: dict) -> str:
     out = []
     for label, est in DOCS_ROWS:
         name, delay = est.split(", ")
-        out.append(f"| {_what(h)} | {name} | {delay} | × the causal 6 Hz "
+        out.append(f"| {_what(h, res)} | {name} | {delay} | × the causal 6 Hz "
                    f"Butterworth against the offline practice: {_cell(h['estimators'][label]['settled'])} |")
     return "\n".join(out)
 
