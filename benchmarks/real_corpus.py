@@ -223,8 +223,32 @@ def summary(recs: list[dict]) -> dict:
                 label: {win: _stats([r["estimators"][label][f"ratio_{win}"][j]
                                      for r in sr for j in r["joints"]])
                         for win in ("settled", "first_second")} for label in ESTIMATORS}
+        h["targets"] = targets(rs, h)
         out[half] = h
     return out
+
+
+def targets(rs: list[dict], h: dict) -> dict:
+    """Issue 29's targets, measured on one half (they are judged on the held-out half):
+    causal default never worse than the Butterworth on any series and median <= 0.85;
+    delay_s 0.05 median <= 0.5; 0.1 and 0.2 s each no worse than the shorter delay (per
+    series, settled NRMSE; 1 % slack for equal numbers); σ inside ±1.96σ 0.90-0.98 per DOF."""
+    k = h["estimators"]["kalman"]["settled"]
+    d05 = h["estimators"]["kalman_delay_0.05"]["settled"]
+    worse_delay = {}
+    pairs = (("kalman_delay_0.1", "kalman_delay_0.05"), ("kalman_delay_0.2", "kalman_delay_0.1"))
+    for longer, shorter in pairs:
+        worse_delay[f"{longer} > {shorter}"] = sum(
+            r["estimators"][longer]["settled"][j] > 1.01 * r["estimators"][shorter]["settled"][j]
+            for r in rs for j in r["joints"])
+    cov = {j: c["inside_1p96"] for j, c in h["sigma_coverage"].items()}
+    return {"causal_series_worse_than_butterworth": k["worse_than_baseline"],
+            "causal_median_ratio": k["ratio"]["median"],
+            "causal_median_le_0.85": k["ratio"]["median"] <= 0.85,
+            "delay_0.05_median_ratio": d05["ratio"]["median"],
+            "delay_0.05_median_le_0.5": d05["ratio"]["median"] <= 0.5,
+            "series_where_more_delay_is_worse": worse_delay,
+            "sigma_inside_1p96": cov, "sigma_0.90_to_0.98": all(0.90 <= x <= 0.98 for x in cov.values())}
 
 
 def run(args) -> dict:
@@ -336,6 +360,21 @@ def docs_table(res: dict) -> str:
             out.append(f"| {half.replace('_', '-')} | {j} | {_x(c['inside_1p96'])} "
                        f"| {_x(c['recording_min_inside'])} "
                        f"| {_x(c['rms_std_over_rmse'])} |")
+    t = res["summary"]["held_out"].get("targets")
+    if t:
+        met = {True: "met", False: "not met"}
+        more = t["series_where_more_delay_is_worse"]
+        out += ["", (f"Targets on the held-out half (issue 29): causal never worse than the Butterworth: "
+                     f"{t['causal_series_worse_than_butterworth']} series worse "
+                     f"({met[t['causal_series_worse_than_butterworth'] == 0]}); causal median "
+                     f"≤ 0.85 ×: {t['causal_median_ratio']:.2f} ({met[t['causal_median_le_0.85']]}); "
+                     f"0.05 s median ≤ 0.5 ×: {t['delay_0.05_median_ratio']:.2f} "
+                     f"({met[t['delay_0.05_median_le_0.5']]}); more delay "
+                     f"worse (> 1.01 ×): {' and '.join(str(x) for x in more.values())} series "
+                     "for 0.1 and 0.2 s "
+                     f"({met[not any(more.values())]}); σ inside ±1.96σ within 0.90–0.98: "
+                     f"{min(t['sigma_inside_1p96'].values()):.3f}–{max(t['sigma_inside_1p96'].values()):.3f} "
+                     f"({met[t['sigma_0.90_to_0.98']]}).")]
     out += ["", (f"`{res['command']}`: {res['wall_time_s']:.0f} s on {res['machine']}, load average "
                  f"{res['loadavg_start'][0]:.1f} at the start, {res['loadavg_end'][0]:.1f} at the end; "
                  "settling "
