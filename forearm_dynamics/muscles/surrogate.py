@@ -64,7 +64,8 @@ class Surrogate:
         degree = np.array([sum(k) for k in keys])
         if len(keys) == 0 or degree[0] != 0 or np.any(np.diff(degree) < 0):
             raise ValueError("monomials must be sorted by degree, the constant first")
-        self.levels = []  # (slice, parent positions, variable index into [1, x...])
+        self.levels = []  # (slice, parent positions) per degree
+        variables = [0]  # per monomial: the variable (index into [1, x...]) it adds
         for d in range(1, int(degree.max()) + 1):
             at = np.nonzero(degree == d)[0]
             parents, var = [], []
@@ -74,8 +75,9 @@ class Surrogate:
                 k[j] -= 1
                 parents.append(pos[tuple(k)])
                 var.append(j + 1)
-            self.levels.append((slice(int(at[0]), int(at[-1]) + 1), np.array(parents),
-                                np.array(var)))
+            self.levels.append((slice(int(at[0]), int(at[-1]) + 1), np.array(parents)))
+            variables += var
+        self.variables = np.array(variables)
 
     @classmethod
     def from_doc(cls, joints: dict, spans: Sequence[Sequence[str]], rows: Sequence[dict], *,
@@ -148,8 +150,9 @@ class Surrogate:
 
     def _monomials(self, xe: np.ndarray, mono: np.ndarray) -> np.ndarray:
         """Fill mono (..., K) from xe (..., 21) = [1, x], degree by degree."""
-        for sl, parent, var in self.levels:
-            np.multiply(mono[..., parent], xe[..., var], out=mono[..., sl])
+        xv = xe[..., self.variables]  # one gather for every level
+        for sl, parent in self.levels:
+            np.multiply(mono[..., parent], xv[..., sl], out=mono[..., sl])
         return mono
 
     def evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
