@@ -280,6 +280,20 @@ def test_impossible_torque_goes_to_the_reserve_and_is_flagged(mm, arm):
     assert np.abs(s.reserves).sum() >= lp.fun - 1e-6
 
 
+def test_passive_option_keeps_the_balance_with_passive_forces_included(mm, arm):
+    """passive=True: the tendon force includes F0·f_PE; the torque still balances."""
+    q = elbow_90()
+    q[J["wrist_flexion"]] = 1.2  # flexed wrist: the extensors stretched
+    q[[J[f"{f}_mcp_flexion"] for f in ("index", "middle", "ring", "little")]] = 1.4
+    tau = arm.inverse_dynamics(q, np.zeros(20), np.zeros(20))
+    s = StaticOptimizer(mm, passive=True).solve(q, np.zeros(20), tau)
+    _, pas = unit_forces(mm.params(), mm.lengths(q), np.zeros(mm.n), passive=True)
+    assert pas.max() > 1.0  # some fibre is stretched past its optimal length
+    assert np.all(s.forces >= pas - 1e-9)
+    R = mm.moment_arms(q)
+    assert np.abs(R.T @ s.forces + s.reserves - tau).max() <= 1e-6
+
+
 def test_fast_unit_forces_equal_the_curves(mm):
     from forearm_dynamics.muscles.curves import UnitForces
 
