@@ -58,10 +58,13 @@ setup(
         # check_bag --html: its offline JavaScript bundle makes the report one file that opens
         # without a network; pure Python (+ narwhals, packaging), so required, not an extra
         "plotly>=6",
+        "daqp>=0.7",  # muscles/static_opt.py: the QP of the static optimisation (MIT)
     ],
     extras_require={
         "plots": ["matplotlib>=3.7"],
         "reference": ["opensim==4.6"],
+        # python -m forearm_dynamics.muscles.fit: re-derives the shipped muscle model
+        "muscles-fit": ["mujoco==3.17.0", "myo-sim==0.2.4"],
         "test": ["pytest>=8", "hypothesis>=6.100", "rosbags>=0.10", "ruff>=0.5",
                  "colcon-common-extensions", "colcon-ros"],
     },

@@ -25,6 +25,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("estimation",),
     ("simulation",),
     ("uncertainty",),
+    ("muscles",),
     ("analysis", "viz", "bag", "codec", "formats"),
     ("offline",),
     ("nodes", "cli"),
