@@ -61,7 +61,7 @@ class ShoulderConvention:
         return a if side == "right" else -(a @ MIRROR.T)
 
     @property
-    def C(self) -> np.ndarray:  # noqa: N802 - the matrix's name in the docs
+    def C(self) -> np.ndarray:
         return np.asarray(self.coupling, float)
 
     def alias_map(self, side: str) -> dict[str, str]:
@@ -205,6 +205,24 @@ def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
 ENU_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
-__all__ = ["CONVENTIONS", "ENU_TO_WORLD", "SHOULDER_CHOICES", "ShoulderConvention",
+
+#: a synthetic shoulder motion per convention: (mid, amplitude, frequency Hz, phase) per
+#: coordinate, inside the coordinates' ranges and away from the sequence's gimbal lock
+#: (MoBL elevation stays 0.3-1.5 rad). Sines, so the derivatives are exact.
+SYNTHETIC = {
+    "mobl": ((0.6, 0.4, 0.5, 0.0), (0.9, 0.6, 0.7, 1.0), (-0.4, 0.5, 0.9, 2.0)),
+    "fullbody": ((0.0, 0.5, 1.4, 0.0), (-0.3, 0.2, 1.4, 1.0), (0.1, 0.2, 0.7, 2.0)),
+}
+
+
+def synthetic_shoulder_motion(name: str, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q, qd, qdd), each (N, 3), of SYNTHETIC[name] at times t (s): for tests and benchmarks."""
+    t = np.atleast_1d(np.asarray(t, float))[:, None]
+    mid, amp, f, ph = (np.array(c) for c in zip(*SYNTHETIC[name]))
+    w = 2 * np.pi * f
+    arg = w * t + ph
+    return mid + amp * np.sin(arg), amp * w * np.cos(arg), -amp * w * w * np.sin(arg)
+
+__all__ = ["CONVENTIONS", "ENU_TO_WORLD", "SHOULDER_CHOICES", "SYNTHETIC", "ShoulderConvention",
            "angles_from_rotation", "axis_rotation", "convention", "detect_convention",
-           "humerus_rotation", "quaternion_matrix", "shoulder_names"]
+           "humerus_rotation", "quaternion_matrix", "shoulder_names", "synthetic_shoulder_motion"]
