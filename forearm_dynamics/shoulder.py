@@ -150,8 +150,9 @@ def humerus_rotation(conv: ShoulderConvention, side: str, angles) -> np.ndarray:
     return r
 
 
-def angles_from_rotation(conv: ShoulderConvention, side: str, r: np.ndarray) -> np.ndarray:
-    """Public angles whose humerus_rotation is `r` (nearest to zero; Gauss-Newton on SO(3)).
+def angles_from_rotation(conv: ShoulderConvention, side: str, r: np.ndarray, guess=None) -> np.ndarray:
+    """Public angles whose humerus_rotation is `r` (nearest to `guess`, default zero;
+    Gauss-Newton on SO(3): a stream passes its previous angles, so they stay continuous).
 
     Used for an orientation sensor: near the sequence's gimbal lock (MoBL: elevation 0,
     full-body: adduction ±90°) the angles are ill-defined and the solution is the least-norm
@@ -160,7 +161,7 @@ def angles_from_rotation(conv: ShoulderConvention, side: str, r: np.ndarray) -> 
     r = np.asarray(r, float)
     axes = conv.axes(side)
     cinv = np.linalg.inv(conv.C)
-    chain = np.zeros(3)
+    chain = np.zeros(3) if guess is None else conv.C @ np.asarray(guess, float)
     for _ in range(50):
         rs = [axis_rotation(a, q) for a, q in zip(axes, chain)]
         cur = rs[0] @ rs[1] @ rs[2]
