@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 import rosproc
-from sensor_msgs.msg import Imu, JointState
 from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu, JointState
 
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.nodes.common import stream_qos
