@@ -55,7 +55,9 @@ def run(args: argparse.Namespace) -> int:
     deg = None if args.in_degrees is None else args.in_degrees == "yes"
     motion = read_motion(args.motion, deg)
     mm = map_motion(motion, cmap)
-    shoulder = shoulder_columns(motion, getattr(args, "side", "right"))
+    shoulder, shoulder_note = shoulder_columns(motion, getattr(args, "side", "right"))
+    if shoulder_note:
+        mm.notes.append(shoulder_note)
     if shoulder is not None:  # the humerus moves: its columns go in as the shoulder's joints
         used = set(shoulder.columns)
         mm.not_modelled = [c for c in mm.not_modelled if c not in used]

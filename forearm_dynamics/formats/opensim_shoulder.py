@@ -36,36 +36,36 @@ def _coordinate(label: str) -> str | None:
     return parts[-2] if len(parts) >= 2 and parts[-1] == "value" else None
 
 
-def shoulder_columns(m: Motion, side: str = "right") -> ShoulderColumns | None:
-    """The shoulder angles of `m` for the `side` arm, or None when the file has none.
+def shoulder_columns(m: Motion, side: str = "right") -> tuple[ShoulderColumns | None, str]:
+    """The shoulder angles of `m` for the `side` arm (None when the file has no complete set)
+    and a note for the user ('' when there is nothing to say).
 
-    A file giving only some of one convention's three angles, or two conventions, is a
-    MotionError naming the columns.
+    A file giving only some of one convention's three angles keeps the humerus welded (the
+    note says which are missing); two complete sets are a MotionError naming them.
     """
     scale = math.pi / 180.0 if m.in_degrees else 1.0
     where = {_coordinate(lab): c for c, lab in enumerate(m.labels)}
     found = []
     for conv in CONVENTIONS.values():
-        for names in ({conv.joint_names}, {conv.aliases[side]}):
-            (cols,) = names
+        for cols in (conv.joint_names, conv.aliases[side]):
             hit = [n for n in cols if n in where]
             if hit:
                 found.append((conv, cols, hit))
     if not found:
-        return None
+        return None, ""
     complete = [(conv, cols) for conv, cols, hit in found if len(hit) == 3]
-    if len(complete) != 1:
-        if not complete:
-            conv, cols, hit = found[0]
-            missing = [n for n in cols if n not in hit]
-            raise MotionError(f"{m.path}: shoulder ({conv.name}): columns {hit} without {missing}: "
-                              "the humerus' orientation needs all three")
+    if not complete:
+        conv, cols, hit = found[0]
+        missing = [n for n in cols if n not in hit]
+        return None, (f"shoulder ({conv.name}): {', '.join(hit)} without {', '.join(missing)}: the "
+                      "humerus' orientation needs all three; it stays welded (vertical, still)")
+    if len(complete) > 1:
         raise MotionError(f"{m.path}: two sets of shoulder columns "
                           f"({', '.join(str(list(c)) for _, c in complete)}): give one")
     conv, cols = complete[0]
     idx = [where[n] for n in cols]
     return ShoulderColumns(conv.name, conv.joint_names, tuple(m.labels[i] for i in idx),
-                           m.data[:, idx] * scale)
+                           m.data[:, idx] * scale), ""
 
 
 __all__ = ["ShoulderColumns", "shoulder_columns"]
