@@ -168,3 +168,23 @@ def test_shoulder_motion_changes_torques_by_what_opensim_says(name, side):
     assert np.abs(change_ref[:, 0]).max() > 0.2
     assert np.abs(change - change_ref).max() < 1e-8
     assert np.abs(ours[:, 20:] - reference[:, 20:]).max() < 1e-8
+
+
+def test_name_matcher_takes_model_file_names_and_external_joints():
+    from forearm_dynamics.description import JOINT_NAMES
+    from forearm_dynamics.nodes import validation as v
+
+    conv = convention("fullbody")
+    names = (*JOINT_NAMES, *conv.joint_names)
+    m = v.NameMatcher(names, aliases=conv.alias_map("right"))
+    msg = ["arm_rot_r", *reversed(JOINT_NAMES), "arm_flex_r", "arm_add_r"]
+    index = m.match(msg)
+    assert [msg[i] for i in index[20:]] == ["arm_flex_r", "arm_add_r", "arm_rot_r"]
+    assert [msg[i] for i in index[:20]] == list(JOINT_NAMES)
+    with pytest.raises(v.Rejection, match="arm_flex_r"):
+        v.NameMatcher(names, aliases=conv.alias_map("right")).match(
+            [*JOINT_NAMES, "arm_flexion", "arm_flex_r", "arm_add_r", "arm_rot_r"])
+    with pytest.raises(v.Rejection, match="3 model joint"):
+        v.NameMatcher(names).match(list(JOINT_NAMES))
+    # supplied by another input (an Imu): not required
+    assert len(v.NameMatcher(names, external=frozenset(conv.joint_names)).match(list(JOINT_NAMES))) == 23
