@@ -167,6 +167,14 @@ class ShoulderArmModel(ArmModel):
         self._one = (self.nv,)
         self._c = shoulder.C
         self._ct = np.ascontiguousarray(shoulder.C.T)
+        # public order (20 joints, then the shoulder) -> Pinocchio's (chain first) and back
+        self._perm = np.r_[20:23, 0:20]
+        self._inv = np.r_[3:23, 0:3]
+        # the coupling's off-diagonal terms, applied in place (C = I + E, E's source
+        # coordinates untouched by it: MoBL's rotation - plane); C.T's likewise
+        off = [(int(i), int(j), float(self._c[i, j])) for i, j in zip(*np.nonzero(self._c - np.eye(3)))]
+        self._couple = tuple(off)
+        self._couple_t = tuple((j, i, k) for i, j, k in off)
         self._q = np.zeros(self.nv)
         self._qd = np.zeros(self.nv)
         self._qdd = np.zeros(self.nv)
@@ -174,28 +182,31 @@ class ShoulderArmModel(ArmModel):
     def __repr__(self) -> str:
         return super().__repr__()[:-1] + f", shoulder={self.shoulder.name!r})"
 
-    def _to_chain(self, x: np.ndarray, out: np.ndarray) -> np.ndarray:
-        out[3:] = x[:20]
-        np.dot(self._c, x[20:], out=out[:3])
-        return out
-
     def inverse_dynamics(self, q, qd, qdd) -> np.ndarray:
         """Torques (N·m; the shoulder's last) for (23,) inputs, or (N, 23) -> (N, 23)."""
-        q = np.asarray(q, dtype=np.float64)
-        qd = np.asarray(qd, dtype=np.float64)
-        qdd = np.asarray(qdd, dtype=np.float64)
+        try:  # fast path: float64 arrays of the right size (the node's): a few µs over rnea
+            if q.shape == self._one and qd.shape == self._one and qdd.shape == self._one:
+                perm = self._perm
+                a, b = q.take(perm, out=self._q), qd.take(perm, out=self._qd)
+                d = qdd.take(perm, out=self._qdd)
+                for i, j, k in self._couple:
+                    a[i] += k * a[j]
+                    b[i] += k * b[j]
+                    d[i] += k * d[j]
+                out = pin.rnea(self.model, self.data, a, b, d).take(self._inv)
+                for i, j, k in self._couple_t:
+                    out[20 + i] += k * out[20 + j]
+                if not math.isfinite(out.dot(out)):
+                    self._raise_nonfinite(q, qd, qdd)
+                return out
+        except (AttributeError, TypeError):  # lists, ints: convert below
+            pass
+        q, qd, qdd = (np.asarray(x, dtype=np.float64) for x in (q, qd, qdd))
+        if q.ndim == 2:
+            return self.inverse_dynamics_batch(q, qd, qdd)
         if q.shape != self._one or qd.shape != self._one or qdd.shape != self._one:
-            if q.ndim == 2:
-                return self.inverse_dynamics_batch(q, qd, qdd)
             self._raise_shape(q, qd, qdd)
-        tau = pin.rnea(self.model, self.data, self._to_chain(q, self._q), self._to_chain(qd, self._qd),
-                       self._to_chain(qdd, self._qdd))
-        if not math.isfinite(tau.dot(tau)):
-            self._raise_nonfinite(q, qd, qdd)
-        out = np.empty(self.nv)
-        out[:20] = tau[3:]
-        np.dot(self._ct, tau[:3], out=out[20:])
-        return out
+        return self.inverse_dynamics(q, qd, qdd)
 
     def inverse_dynamics_batch(self, q, qd, qdd) -> np.ndarray:
         q, qd, qdd = (np.ascontiguousarray(x, dtype=np.float64) for x in (q, qd, qdd))
