@@ -1,6 +1,6 @@
 """The moving shoulder (docs/shoulder.md): torques against OpenSim, and the torque path's cost.
 
-    python -m benchmarks.shoulder [--hamner subject02_running_ik.mot] [--latency]
+    python -m benchmarks.shoulder [--hamner subject02_running_ik.mot] [--corpus ue_adl.npz] [--latency]
                                   [--movements 1 2 ...] [--out benchmarks/shoulder.json]
 
 engine: elbow and wrist torques (elbow_flexion, pro_sup, wrist_flexion, wrist_deviation)
@@ -14,7 +14,9 @@ RMSE / the reference's peak-to-peak, per DOF, worst over the set; on
   committed): its arm_flex_r/arm_add_r/arm_rot_r drive the humerus, elbow_flex_r,
   pro_sup_r (offset -90°: their 0 is full supination), wrist_flex_r, wrist_dev_r the arm;
   derivatives of the 6 Hz zero-phase low-passed angles (np.gradient; both engines get the
-  same q, qd, qdd). Also stated: how much the shoulder changes the elbow's torque there.
+  same q, qd, qdd). Also stated: how much the shoulder changes the elbow's torque there;
+- (--corpus) the UE-ADL recordings with the real shoulder motion the corpus helper derived
+  from their markers (benchmarks/corpus/ue_adl.npz of that branch), as MoBL angles.
 latency (--latency): the 1 kHz replay through torque_node with shoulder fullbody (the
 publisher adds the synthetic shoulder motion) against null_echo_node fed the same stream,
 same run (benchmarks/torque_path.py): p50/p99 of receive - stamp, and the ratio.
@@ -116,6 +118,50 @@ def hamner(path: Path) -> dict:
                                    for k, c in enumerate(CONVENTIONS["fullbody"].joint_names)}}
 
 
+def corpus(path: Path) -> dict:
+    """UE-ADL recordings with their real shoulder motion (the corpus helper's ue_adl.npz:
+    `<name>/q` (N, 20) rad and `<name>/shoulder` (N, 3) ISB Y-X-Y thorax-humerus angles
+    (plane, elevation, axial rotation), 100 Hz; manifest.json beside it names the joints of
+    `q`; left arms come mirrored, as right-arm angles), read as MoBL angles (shoulder_rot = axial +
+    plane: MoBL's third rotation is rotation - plane). Nothing is fitted: every recording."""
+    import json
+
+    data = np.load(path)
+    manifest = json.loads((path.parent / "manifest.json").read_text())
+    recs = manifest if isinstance(manifest, list) else manifest.get("recordings", manifest)
+    joints = {r["name"]: r["joints"] for r in (recs if isinstance(recs, list) else recs.values())}
+    names = sorted(k[:-len("/shoulder")] for k in data if k.endswith("/shoulder"))
+    arm = build_model(shoulder="mobl")
+    engine = OpenSimArm(arm.tree, arm.shoulder)
+    welded = build_model()
+    per, change = [], []
+    e = JOINT_NAMES.index("elbow_flexion")
+    for name in names:
+        sh = data[f"{name}/shoulder"]
+        measured = data[f"{name}/q"]  # the manifest's joints, in its order (the left mirrored)
+        q = np.zeros((len(sh), 23))
+        for c, j in enumerate(joints[name]):
+            q[:, JOINT_NAMES.index(j)] = measured[:, c]
+        q[:, 20:22] = sh[:, :2]
+        q[:, 22] = sh[:, 2] + sh[:, 0]
+        if len(q) < 30:
+            continue
+        t = np.arange(len(q)) / 100.0
+        q = lowpass(q, 100.0, 6.0)
+        qd = np.gradient(q, t, axis=0)
+        qdd = np.gradient(qd, t, axis=0)
+        ours = arm.inverse_dynamics(q, qd, qdd)
+        per.append(nrmse(ours[:, :20], engine.inverse_dynamics(q, qd, qdd)[:, :20]))
+        change.append(float(np.abs(ours[:, e] - welded.inverse_dynamics(q[:, :20], qd[:, :20],
+                                                                          qdd[:, :20])[:, e]).max()))
+    per = np.array(per)
+    return {"file": path.name, "recordings": len(per),
+            "nrmse_pct_worst_recording": _per_dof(np.nanmax(per, axis=0)),
+            "nrmse_pct_median": _per_dof(np.nanmedian(per, axis=0)),
+            "elbow_change_by_shoulder_max_nm_median": float(np.median(change)),
+            "elbow_change_by_shoulder_max_nm_max": float(np.max(change))}
+
+
 def latency(movements: list[int], domain: int) -> dict:
     from .torque_path import Variant, run_variant
 
@@ -141,6 +187,8 @@ def latency(movements: list[int], domain: int) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="benchmarks.shoulder", description=__doc__.split("\n\n")[0])
     ap.add_argument("--hamner", type=Path, default=None, help="subject02_running_ik.mot (fetched)")
+    ap.add_argument("--corpus", type=Path, default=None,
+                    help="the corpus helper's benchmarks/corpus/ue_adl.npz (UE-ADL, real shoulder motion)")
     ap.add_argument("--latency", action="store_true", help="also the torque path (ROS processes)")
     ap.add_argument("--movements", type=int, nargs="+", default=list(range(1, 21)))
     ap.add_argument("--domain", type=int, default=83)
@@ -153,6 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     result["library"] = {name: library(name) for name in CONVENTIONS}
     if args.hamner is not None:
         result["hamner_subject02"] = hamner(args.hamner)
+    if args.corpus is not None:
+        result["ue_adl"] = corpus(args.corpus)
     if args.latency:
         lease = claim_domain_arg(ap, args.domain, "benchmarks.shoulder")
         try:
