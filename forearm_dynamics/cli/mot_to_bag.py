@@ -27,6 +27,7 @@ from ..codec.ros import message, serialize
 from ..description import JOINT_NAMES
 from ..exit_codes import OK, USAGE
 from ..formats.opensim import CoordinateMap, map_motion, read_motion
+from ..formats.opensim_shoulder import shoulder_columns
 from .common import die, guarded
 
 PROG = "mot_to_bag"
@@ -54,6 +55,13 @@ def run(args: argparse.Namespace) -> int:
     deg = None if args.in_degrees is None else args.in_degrees == "yes"
     motion = read_motion(args.motion, deg)
     mm = map_motion(motion, cmap)
+    shoulder, shoulder_note = shoulder_columns(motion, getattr(args, "side", "right"))
+    if shoulder_note:
+        mm.notes.append(shoulder_note)
+    if shoulder is not None:  # the humerus moves: its columns go in as the shoulder's joints
+        used = set(shoulder.columns)
+        mm.not_modelled = [c for c in mm.not_modelled if c not in used]
+        mm.unknown = [c for c in mm.unknown if c not in used]
     start_ns = round((time.time() if args.start is None else args.start) * 1e3) * 1_000_000
     stamps = [start_ns + round(float(t) * 1e9) for t in mm.time]
     if stamps[0] <= 0:
@@ -61,17 +69,19 @@ def run(args: argparse.Namespace) -> int:
                    "stamp <= 0 (stamp 0 means 'missing' to the torque node); give a later --start", USAGE)
     info = {"source": str(args.motion), "kind": motion.kind, "in_degrees": motion.in_degrees,
             "start_ns": start_ns, "mapped": mm.mapped, "held_rad": mm.held,
-            "not_modelled": mm.not_modelled, "unknown": mm.unknown}
+            "not_modelled": mm.not_modelled, "unknown": mm.unknown,
+            "shoulder": None if shoulder is None else dict(zip(shoulder.names, shoulder.columns))}
     with BagWriter(args.output, overwrite=args.overwrite) as w:
         w.add_metadata(METADATA, {k: json.dumps(v) for k, v in info.items()})
         ch = w.add_topic("/" + args.topic.strip("/"), "sensor_msgs/msg/JointState", TopicQos(depth=1000))
         msg = message("JointState")()
         msg.header.frame_id = args.frame_id
-        msg.name = list(JOINT_NAMES)
+        msg.name = list(JOINT_NAMES) + ([] if shoulder is None else list(shoulder.names))
         for k, stamp in enumerate(stamps):
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-            msg.position = mm.q[k].tolist()
-            msg.velocity = [] if mm.qd is None else mm.qd[k].tolist()
+            msg.position = mm.q[k].tolist() + ([] if shoulder is None else shoulder.q[k].tolist())
+            # velocities only when every joint has one (the shoulder's come from no speed column)
+            msg.velocity = [] if mm.qd is None or shoulder is not None else mm.qd[k].tolist()
             w.write(ch, tidy(serialize(msg)), stamp)
     dt = float(mm.time[-1] - mm.time[0]) / max(len(mm.time) - 1, 1)
     print(f"{PROG}: {len(stamps)} rows of {motion.kind} file {args.motion} ("
@@ -80,6 +90,9 @@ def run(args: argparse.Namespace) -> int:
           f"{', with velocities' if mm.qd is not None else ''})")
     print(f"  mapped ({len(mm.mapped)}): " + ", ".join(f"{c} -> {j}" if c != j else j
                                                        for j, c in mm.mapped.items()))
+    if shoulder is not None:
+        print(f"  shoulder ({shoulder.convention}, the humerus moves): "
+              + ", ".join(f"{c} -> {n}" for n, c in zip(shoulder.names, shoulder.columns)))
     if mm.held:
         print(f"  held at the map's posture ({len(mm.held)}): "
               + ", ".join(f"{j} {v:g} rad" for j, v in mm.held.items()))

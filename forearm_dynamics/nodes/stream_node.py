@@ -161,7 +161,8 @@ class JointStreamNode(RealtimeNode, Node):
 
         self.joint_names = tuple(joint_names)
         hold = self.hold_posture()  # missing_joints: hold -> (n,) posture, else None (reject)
-        self.names = v.NameMatcher(self.joint_names, hold=hold is not None)
+        self.names = v.NameMatcher(self.joint_names, hold=hold is not None,
+                                   aliases=self.input_aliases(), external=self.external_joints())
         self._hold = hold
         self.held_joints: tuple[str, ...] = ()  # held in the last input (missing_joints: hold)
         #: compute() sets this when its output is the estimate of another stamp (a delay)
@@ -326,6 +327,14 @@ class JointStreamNode(RealtimeNode, Node):
             self.get_logger().info(f"holding {len(held)} joint(s) the input lacks: "
                                    f"{', '.join(self.held_joints[:6])}"
                                    + (" ..." if len(held) > 6 else "") + " (missing_joints: hold)")
+
+    def input_aliases(self) -> dict[str, str]:
+        """Other names an input may give a model joint -> the model's name (none here)."""
+        return {}
+
+    def external_joints(self) -> frozenset[str]:
+        """Model joints another input supplies: not required in joint_states (none here)."""
+        return frozenset()
 
     def hold_posture(self) -> np.ndarray | None:
         """missing_joints: hold -> the posture (rad, model order) of the joints an input

@@ -47,11 +47,13 @@ import pinocchio as pin
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import String
 
+from ..description import JOINT_NAMES
 from ..estimation.stamps import MIN_SUPPORTED_RATE_HZ, rate_note
 from ..model_config import config_message
+from ..shoulder import ENU_TO_WORLD, angles_from_rotation, convention, quaternion_matrix
 from ..version import package_version
 from . import validation as v
 from .common import latched_qos, main_for, stream_qos
@@ -78,6 +80,18 @@ _monotonic_ns = time.monotonic_ns
 _MAX_BACKLOG_S = 0.05
 
 
+def _torques(b: ModelBundle, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """RNEA of the bundle's model; with a shoulder, its public coordinates to the chain and
+    back (ShoulderArmModel.inverse_dynamics); non-finite comes back as NaN (the caller
+    refuses it)."""
+    if b.arm.nv == 20:
+        return pin.rnea(b.model, b.data, q, qd, qdd)
+    try:
+        return b.arm.inverse_dynamics(q, qd, qdd)
+    except ValueError:
+        return np.full(b.arm.nv, np.nan)
+
+
 class TorqueNode(JointStreamNode):
     """Inverse dynamics per sample: pin.rnea on preallocated q, qd, qdd."""
 
@@ -97,6 +111,10 @@ class TorqueNode(JointStreamNode):
         self._publish_config(self.live.in_use, 0)
         # a helper thread: stays at normal priority
         self._worker = ModelBuilder(self.build, self._publish_config)
+        if self._imu_topic:
+            self.imu_sub = self.create_subscription(Imu, self._imu_topic, self._on_imu,
+                                                    stream_qos(self.settings.qos_depth,
+                                                               self.settings.input_reliable))
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         if self.output_rate_hz > 0:
@@ -124,6 +142,32 @@ class TorqueNode(JointStreamNode):
     def hold_posture(self) -> np.ndarray | None:
         return self._hold_posture
 
+    def input_aliases(self) -> dict[str, str]:
+        """The shoulder's model-file names (both sides: the side may change live)."""
+        if self._shoulder == "none":
+            return {}
+        conv = convention(self._shoulder)
+        return {**conv.alias_map("right"), **conv.alias_map("left")}
+
+    def external_joints(self) -> frozenset[str]:
+        if not self._imu_topic:
+            return frozenset()
+        return frozenset(convention(self._shoulder).joint_names)
+
+    def _on_imu(self, msg: Imu) -> None:
+        """An upper-arm orientation -> the shoulder angles the next joint sample uses."""
+        o = msg.orientation
+        quat = (o.x, o.y, o.z, o.w)
+        if not math.isfinite(sum(quat)) or sum(x * x for x in quat) < 1e-6:
+            self._imu_bad += 1
+            if self._imu_bad == 1:
+                self.get_logger().warning(f"{self.imu_sub.topic_name}: orientation {quat} is not a "
+                                          "rotation (NaN or zero quaternion): ignored")
+            return
+        arm = self.live.in_use.arm
+        r = ENU_TO_WORLD @ quaternion_matrix(*quat) @ self._imu_mount
+        self._imu_angles = angles_from_rotation(arm.shoulder, arm.side, r, self._imu_angles)
+
     def configure(self, params: Params) -> tuple[str, ...]:
         out = self.output_settings = OutputSettings.from_params(params)
         self.missing_joints = params.value("missing_joints")
@@ -133,7 +177,23 @@ class TorqueNode(JointStreamNode):
         if out.publish_std:
             self._std_topic = params.topic("std_topic")
             params.distinct_topics(("input_topic", "output_topic", "std_topic"), RESERVED_TOPICS)
-        request = ModelRequest.from_values(params.values(LIVE))
+        self._shoulder = params.value("shoulder")
+        self._imu_topic = params.value("imu_topic").strip()
+        self._imu_angles: np.ndarray | None = None  # the latest Imu's shoulder angles
+        self._imu_bad = 0  # Imu messages refused (non-finite or zero quaternion)
+        if self._imu_topic and self._shoulder == "none":
+            raise ParameterError("imu_topic", "needs shoulder mobl or fullbody (which angles the "
+                                 "Imu's orientation is turned into)")
+        if self._shoulder != "none" and out.publish_std:
+            raise ParameterError("publish_std", "not available with a shoulder yet (the torque σ "
+                                 "is that of the 20-joint model)")
+        mount = [float(x) for x in params.value("imu_mount")]
+        if len(mount) != 4 or not math.isfinite(sum(mount)) or sum(x * x for x in mount) < 1e-6:
+            raise ParameterError("imu_mount", f"{mount}: needs a quaternion (x, y, z, w), not zero")
+        self._imu_mount = quaternion_matrix(*mount)
+        values = params.values(LIVE)
+        values["shoulder"] = self._shoulder
+        request = ModelRequest.from_values(values)
         try:
             bundle = build_bundle(request, 1, 20, std=self._std_topic)
         except ValueError as exc:
@@ -151,8 +211,8 @@ class TorqueNode(JointStreamNode):
         self._hold_posture = None
         self._held_stated: tuple[str, ...] = ()
         if self.missing_joints == "hold":
-            self._hold_posture = np.array([params.value(f"hold_posture.{j}")
-                                           for j in bundle.arm.joint_names])
+            self._hold_posture = np.array([params.value(f"hold_posture.{j}") if j in JOINT_NAMES
+                                           else 0.0 for j in bundle.arm.joint_names])
         self.live = LiveModel(bundle, make, self.config_message)
         # output_rate_hz > 0: whether the estimator holds a state to predict from, the input clock
         self._have_state = False
@@ -172,6 +232,13 @@ class TorqueNode(JointStreamNode):
             reset = True
         est = b.estimator
         ts = b.std
+        if self._imu_topic:  # the shoulder from the Imu: its latest orientation
+            angles = self._imu_angles
+            if angles is None:
+                raise v.Rejection(v.NO_IMU, f"no Imu on {self._imu_topic} yet: the shoulder angles "
+                                  "are unknown")
+            self.q[20:] = angles
+            velocity_given = False  # the shoulder's rates are estimated like the others'
         if reset:
             est.reset()
             if ts is not None:
@@ -200,7 +267,7 @@ class TorqueNode(JointStreamNode):
         # computed from it and the output message states it ("position and velocity as used")
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
-        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+        tau = _torques(b, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh
             if ts is not None:
@@ -272,7 +339,7 @@ class TorqueNode(JointStreamNode):
         est.predict(stamp)  # from the last update's estimate, whatever was predicted before
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
-        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+        tau = _torques(b, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             self.stats.rejected[v.NON_FINITE_TORQUE] += 1
             return False
@@ -310,6 +377,7 @@ class TorqueNode(JointStreamNode):
                 why = self.params.specs[p.name].check(p.value) if p.name in self.params.specs else None
                 if why:
                     raise ParameterError(p.name, why)
+            values["shoulder"] = self._shoulder
             self._requested = ModelRequest.from_values(values)
         except ParameterError as exc:
             self.live.count("refused")
