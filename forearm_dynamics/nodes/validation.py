@@ -36,6 +36,8 @@ NON_FINITE_TORQUE = "non_finite_torque"  # finite inputs but absurd values overf
 TOO_MANY_NAMES = "too_many_names"  # more than MAX_NAMES names (bounded work and memory)
 STAMP_INVALID = "stamp_invalid"  # negative, or nanosec outside [0, 1e9)
 STAMP_IN_FUTURE = "stamp_in_future"  # more than FUTURE_TOLERANCE_S ahead of this node's clock
+#: a position far outside its joint's range (forearm_dynamics/ranges.py): degrees as radians
+ANGLE_OUT_OF_RANGE = "angle_out_of_range"
 
 #: Names a message may carry (the model's 20 and others, ignored). A real robot has tens;
 #: the limit bounds the per-message work and the name-list cache (16 lists) at ~1 MB.
@@ -58,6 +60,7 @@ REASONS = (
     TOO_MANY_NAMES,
     STAMP_INVALID,
     STAMP_IN_FUTURE,
+    ANGLE_OUT_OF_RANGE,
 )
 
 

@@ -42,6 +42,7 @@ from ..estimation import DEFAULT_ESTIMATOR, make_estimator
 from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, segments, zero_phase
 from ..filtering import analysis_config
+from ..ranges import check_recording
 from ..uncertainty import NoCovariance, TorqueStd
 from ..version import package_version
 
@@ -111,6 +112,10 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
     dropped = int((~keep).sum())
     idx = np.flatnonzero(keep)
     t, q = stream.stamp_ns[idx], stream.position[idx]
+    units = check_recording(q, arm.joint_names, source=f"{stream.topic} positions")
+    if units.refusal:  # degrees as radians (or radians twice): torques of nothing real
+        raise UsageError(units.refusal + "; nothing written")
+    warnings += units.warnings
     has_v = stream.has_velocity[idx]
     start = time.perf_counter()
     std_out, std_config = None, {"published": False, "why": "not asked for (--no-std)"}
