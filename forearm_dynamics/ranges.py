@@ -145,7 +145,8 @@ def check_recording(q: np.ndarray, joint_names: Sequence[str], *, source: str,
 class SampleGuard:
     """Per-sample check of a stream (torque_node): cheap when inside (maximum, minimum,
     subtract on preallocated arrays and one dot: the distance outside the warning band is
-    zero; the fastest of the forms measured, ~7 us at load 10 against ~17 for a compare-any), a refusal line for a far sample, one warning per joint moderately
+    zero; the fastest of the forms measured, ~7 us at load 10 against ~17 for a compare-any),
+    a refusal line for a far sample, one warning per joint moderately
     outside (`pending_warnings`), and, over the stream's first `window_s`, the radians-twice
     pattern (`check_window`)."""
 
