@@ -150,7 +150,7 @@ class SampleGuard:
     outside (`pending_warnings`), and, over the stream's first `window_s`, the radians-twice
     pattern (`check_window`)."""
 
-    def __init__(self, joint_names: Sequence[str], window_s: float = 2.0):
+    def __init__(self, joint_names: Sequence[str], window_s: float = 1.0):
         self.names = tuple(joint_names)
         self.ranges = AngleRanges.of(joint_names)
         self._lo, self._hi = self.ranges.warn_limits()

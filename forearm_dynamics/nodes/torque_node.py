@@ -18,7 +18,7 @@ Output sensor_msgs/JointState on `joint_torques`: the model's 20 joints in joint
 Angles are checked against the joints' ranges (forearm_dynamics/ranges.py, the check every
 input path shares): a sample far outside (degrees sent as radians) is rejected
 (angle_out_of_range) with a line naming units, and /diagnostics turns ERROR while such
-samples come; a joint moderately outside is warned about once; a stream whose first 2 s
+samples come; a joint moderately outside is warned about once; a stream whose first 1 s
 stay within +-3 deg while moving (radians converted twice) is warned about once (WARN).
 
 Velocity and acceleration come from the state estimator (parameter `estimator`, settings
