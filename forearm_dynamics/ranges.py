@@ -105,9 +105,13 @@ def _deg(x: float) -> str:
 
 
 def check_recording(q: np.ndarray, joint_names: Sequence[str], *, source: str,
-                    measured: Sequence[bool] | None = None) -> RangeReport:
+                    measured: Sequence[bool] | None = None,
+                    as_given: np.ndarray | None = None) -> RangeReport:
     """Angles (N, J) rad of a recording; `measured` leaves held joints out. The refusal
-    names `source` (file, topic), the first far joint and its value, and units."""
+    names `source` (file, topic), the first far joint and its value, and units.
+    `as_given`: the angles before a coordinate map's zero offsets (a file's own values,
+    scaled to rad): the radians-twice rule looks at those (full-body pro_sup_r is offset by
+    -90 deg, so tiny values of the file are not tiny after the map)."""
     q = np.atleast_2d(np.asarray(q, float))
     rng = AngleRanges.of(joint_names)
     use = np.ones(len(joint_names), bool) if measured is None else np.asarray(measured, bool)
@@ -126,7 +130,7 @@ def check_recording(q: np.ndarray, joint_names: Sequence[str], *, source: str,
                        f"its {rng.describe(j)} ({len(cols)} joint(s), {n_rows} of {len(q)} samples "
                        f"far out); {UNITS_HINT}")
         return rep
-    qa = finite[:, use]
+    qa = (finite if as_given is None else np.atleast_2d(np.asarray(as_given, float)))[:, use]
     if len(q) > 1 and np.abs(qa).max() <= TINY_RAD and np.ptp(qa, axis=0).max() >= TINY_MOTION_RAD:
         rep.tiny = True
         rep.refusal = (f"{source}: every measured angle is within +-{math.degrees(TINY_RAD):.2f} deg "

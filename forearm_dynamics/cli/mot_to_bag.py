@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     mm = map_motion(motion, cmap, args.side)
     measured = [j in mm.mapped for j in JOINT_NAMES]
     units = "inDegrees=" + ("yes" if motion.in_degrees else "no")
-    check = check_recording(mm.q, JOINT_NAMES, source=f"{args.motion} ({units})", measured=measured)
+    check = check_recording(mm.q, JOINT_NAMES, source=f"{args.motion} ({units})", measured=measured,
+                            as_given=mm.as_given)
     if check.refusal:
         raise MotionError(check.refusal + "; nothing written")
     start_ns = round((time.time() if args.start is None else args.start) * 1e3) * 1_000_000

@@ -202,6 +202,7 @@ class MappedMotion:
     unknown: list[str]
     notes: list[str] = field(default_factory=list)
     other_arm: list[str] = field(default_factory=list)  # the other side's arm columns
+    as_given: np.ndarray | None = None  # (N, 20) q before the map's offsets (ranges.py)
 
 
 def _coordinate_of(label: str) -> tuple[str, str]:
@@ -224,6 +225,7 @@ def map_motion(m: Motion, cmap: CoordinateMap, side: str = "right") -> MappedMot
     mapped, speeds = {}, set()
     not_modelled, unknown, notes, other_arm = [], [], [], []
     entries, other = cmap.for_side(side), cmap.other_side(side)
+    offsets = np.zeros(len(JOINT_NAMES))
     if cmap.strict:
         present = {_coordinate_of(lab)[0] for lab in m.labels}
         absent = [name for name in entries if name not in present and name not in JOINT_NAMES]
@@ -255,6 +257,7 @@ def map_motion(m: Motion, cmap: CoordinateMap, side: str = "right") -> MappedMot
         if joint in mapped:
             raise MotionError(f"{m.path}: columns {mapped[joint]!r} and {label!r} both give {joint}")
         q[:, j] = sign * scale * m.data[:, c] + offset
+        offsets[j] = offset
         mapped[joint] = label
     if not mapped:
         raise MotionError(f"{m.path}: no column maps to a joint of the model (columns: "
@@ -269,7 +272,7 @@ def map_motion(m: Motion, cmap: CoordinateMap, side: str = "right") -> MappedMot
     if speeds and not use_speeds:
         notes.append("speeds given for some coordinates only: velocities left empty")
     return MappedMotion(m.time, q, qd if use_speeds else None, mapped, held, not_modelled, unknown,
-                        notes, other_arm)
+                        notes, other_arm, q - offsets)
 
 
 def write_table(path: str | os.PathLike, title: str, labels: list[str], time: np.ndarray,
