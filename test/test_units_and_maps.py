@@ -1,6 +1,6 @@
 """Issue 30 items 2-3: OpenSim files as labs have them (the default map knows the full-body
 models' arm names, a typo in a user's map is an error) and units mistakes refused on every
-path (ranges.py: mot_to_bag, bag_torques, check_bag; the node: test_units_live.py).
+path (ranges.py: here the core; the tools: test_units_cli.py; the node: test_units_live.py).
 
 The Hamner file's header (opensim-models Pipelines/Hamner/outputReference/ResultsIK/
 subject02_running_ik.mot, commit 025471aeb655259d7442d87110a5189cf6ffe3df) is written out
@@ -9,21 +9,17 @@ below as a fact; its values are synthetic, made here."""
 from __future__ import annotations
 
 import math
-import subprocess
 
 import numpy as np
 import pytest
-from rosbags.highlevel import AnyReader
-from rosproc import BIN, ros_env
 
 from forearm_dynamics import JOINT_NAMES, build_model, movement_library
-from forearm_dynamics.bag import BagWriter, TopicQos
 from forearm_dynamics.bounds import torque_bounds
-from forearm_dynamics.codec.jointstate import tidy
-from forearm_dynamics.codec.ros import message, serialize
 from forearm_dynamics.errors import MotionError
 from forearm_dynamics.formats.opensim import CoordinateMap, map_motion, read_motion
 from forearm_dynamics.ranges import TINY_HINT, UNITS_HINT, SampleGuard, check_recording
+
+pytestmark = pytest.mark.unit
 
 #: the file's column labels after `time`, as written in its header line (tab separated)
 HAMNER_HEADER = ("pelvis_tilt\tpelvis_list\tpelvis_rotation\tpelvis_tx\tpelvis_ty\tpelvis_tz\t"
@@ -62,17 +58,7 @@ def write_hamner(path, degrees_header: bool, scale: float = 1.0, rate: float = 6
     return t
 
 
-def run(exe: str, *args) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN / exe), *map(str, args)], env=ros_env(), capture_output=True,
-                          text=True, timeout=180, check=False)
-
-
-def error_lines(r: subprocess.CompletedProcess) -> list[str]:
-    return [ln for ln in r.stderr.splitlines() if "error" in ln]
-
-
 # -- the map (unit) -------------------------------------------------------------------------
-@pytest.mark.unit
 @pytest.mark.parametrize("side,suffix", [("right", "_r"), ("left", "_l")])
 def test_hamner_columns_map_with_the_default_map(tmp_path, side, suffix):
     src = tmp_path / "subject02_running_ik.mot"
@@ -92,7 +78,6 @@ def test_hamner_columns_map_with_the_default_map(tmp_path, side, suffix):
     assert len(mm.held) == 16
 
 
-@pytest.mark.unit
 def test_typo_in_a_users_map_is_an_error(tmp_path):
     src = tmp_path / "run.mot"
     write_hamner(src, True)
@@ -113,7 +98,6 @@ def test_typo_in_a_users_map_is_an_error(tmp_path):
 
 
 # -- the range check (unit) -------------------------------------------------------------------
-@pytest.mark.unit
 def test_every_movement_in_wrong_units_is_refused_and_in_right_units_is_not():
     """The matrix of benchmarks/units_matrix.py on the core check, every library movement."""
     counts = {"correct": 0, "deg_as_rad": 0, "rad_twice": 0}
@@ -128,7 +112,6 @@ def test_every_movement_in_wrong_units_is_refused_and_in_right_units_is_not():
     assert counts == {"correct": 0, "deg_as_rad": n, "rad_twice": n}
 
 
-@pytest.mark.unit
 def test_bands_far_moderate_held_and_zeros():
     q = np.zeros((10, 20))
     assert check_recording(q, JOINT_NAMES, source="zeros").refusal is None  # a still neutral pose
@@ -152,7 +135,6 @@ def test_bands_far_moderate_held_and_zeros():
     assert rep.tiny and TINY_HINT in rep.refusal
 
 
-@pytest.mark.unit
 def test_torque_bound_holds_for_the_library_and_not_for_degrees():
     arm = build_model("segmented", 50)
     b = torque_bounds(arm)
@@ -168,81 +150,3 @@ def test_torque_bound_holds_for_the_library_and_not_for_degrees():
     assert (np.abs(arm.inverse_dynamics_batch(q, qd, qdd)) > bound).any()
 
 
-# -- the tools (cli) ----------------------------------------------------------------------------
-@pytest.mark.cli
-def test_mot_to_bag_hamner_default_map_and_units(tmp_path):
-    src = tmp_path / "subject02_running_ik.mot"
-    t = write_hamner(src, True)
-    bag = tmp_path / "ok.mcap"
-    r = run("mot_to_bag", src, bag, "--start", START)
-    assert r.returncode == 0, r.stderr
-    assert "mapped (4): elbow_flex_r -> elbow_flexion, pro_sup_r -> pro_sup" in r.stdout
-    assert "the other arm's columns, not used (--side left for them) (4)" in r.stdout
-    warn = [ln for ln in r.stderr.splitlines() if "model joints not in the file" in ln]
-    assert len(warn) == 1 and warn[0].startswith("mot_to_bag: warning: 16 of 20 model joints")
-    with AnyReader([bag]) as rd:
-        pos = np.array([rd.deserialize(raw, c.msgtype).position for c, _t, raw in rd.messages()])
-    np.testing.assert_allclose(pos[:, 1], np.radians(hamner_angles_deg(t)["pro_sup_r"] - 90), atol=1e-9)
-
-    # degrees under inDegrees=no: refused, one line naming units; nothing written
-    deg = tmp_path / "deg_as_rad.mot"
-    write_hamner(deg, degrees_header=False)
-    r = run("mot_to_bag", deg, tmp_path / "x.mcap", "--start", START)
-    assert r.returncode == 2
-    assert len(error_lines(r)) == 1 and "inDegrees=no" in r.stderr and "check units" in r.stderr
-    assert "Traceback" not in r.stderr and not (tmp_path / "x.mcap").exists()
-    # radians under inDegrees=yes: refused too
-    rad = tmp_path / "rad_as_deg.mot"
-    write_hamner(rad, degrees_header=True, scale=math.pi / 180)
-    r = run("mot_to_bag", rad, tmp_path / "y.mcap", "--start", START)
-    assert r.returncode == 2 and len(error_lines(r)) == 1 and "check units" in r.stderr
-    # a typo in a user's map: exit 2, one line naming it
-    typo = tmp_path / "typo.yaml"
-    typo.write_text("coordinates:\n  elbow_flexx_r: {joint: elbow_flexion}\n")
-    r = run("mot_to_bag", src, tmp_path / "z.mcap", "--map", typo)
-    assert r.returncode == 2 and len(error_lines(r)) == 1 and "elbow_flexx_r" in r.stderr
-
-
-def _write_recording(path, q: np.ndarray, t_ns: np.ndarray, tau: np.ndarray) -> None:
-    """joint_states and the joint_torques a node without the range check would have sent."""
-    with BagWriter(path) as w:
-        s = w.add_topic("/joint_states", "sensor_msgs/msg/JointState", TopicQos(depth=1000))
-        o = w.add_topic("/joint_torques", "sensor_msgs/msg/JointState", TopicQos(depth=1000))
-        msg = message("JointState")()
-        msg.name = list(JOINT_NAMES)
-        for k, stamp in enumerate(t_ns.tolist()):
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-            msg.position, msg.effort = q[k].tolist(), []
-            w.write(s, tidy(serialize(msg)), stamp)
-            msg.effort = tau[k].tolist()
-            w.write(o, tidy(serialize(msg)), stamp + 200_000)
-
-
-@pytest.mark.cli
-def test_check_bag_fails_degrees_with_check_units_and_bag_torques_refuses(tmp_path):
-    src = tmp_path / "run.mot"
-    write_hamner(src, True)
-    mm = map_motion(read_motion(src), CoordinateMap.load())
-    t_ns = (START * 1e9 + mm.time * 1e9).astype(np.int64)
-    arm = build_model("segmented", 50)
-    dt = float(np.median(np.diff(mm.time)))
-    for name, q in (("right.mcap", mm.q), ("degrees.mcap", np.degrees(mm.q))):
-        qd = np.gradient(q, dt, axis=0)
-        tau = arm.inverse_dynamics_batch(q, qd, np.gradient(qd, dt, axis=0))
-        _write_recording(tmp_path / name, q, t_ns, tau)
-    r = run("check_bag", tmp_path / "degrees.mcap")
-    assert r.returncode == 1, r.stdout + r.stderr
-    fails = [ln for ln in r.stdout.splitlines() if ln.startswith("FAIL: ")]
-    assert fails and "check units" in fails[0] and "joint_states positions" in fails[0]
-    assert not any("estimator:=kalman" in f for f in fails)  # no estimator advice for units
-    r = run("check_bag", tmp_path / "right.mcap")
-    assert "check units" not in r.stdout, r.stdout
-    still = [ln for ln in r.stdout.splitlines() if ln.endswith("still")]
-    assert len(still) == 16 and not any(ln.startswith("thumb_cmc_abduction") and "worst" in ln
-                                        for ln in r.stdout.splitlines())
-    worst = next(ln for ln in r.stdout.splitlines() if "worst" in ln)
-    assert any(j in worst for j in ("elbow_flexion", "pro_sup", "wrist_flexion", "wrist_deviation")), worst
-    # bag_torques on the bag of degrees: refused (exit 2), one line naming units
-    r = run("bag_torques", tmp_path / "degrees.mcap", tmp_path / "tq.mcap")
-    assert r.returncode == 2 and len(error_lines(r)) == 1 and "check units" in r.stderr
-    assert not (tmp_path / "tq.mcap").exists()
