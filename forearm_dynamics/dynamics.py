@@ -13,6 +13,7 @@ from .builders import ForearmPlacement, build_tree, resolve_placement
 from .description import load_description
 from .hand import grasp_point
 from .payload import Payload, make_payload
+from .ranges import AngleRanges, far_refusal
 from .tree import KinematicTree
 
 _OVERRIDES = ("split", "axis_offset_proximal", "axis_offset_distal", "cylinder")
@@ -67,6 +68,7 @@ class ArmModel:
         self.model = pinocchio_model(tree)
         self.data = self.model.createData()
         self._one = (self.nv,)
+        self._ranges = None  # ranges.AngleRanges, made on the first batch
 
     def __repr__(self) -> str:
         payload = "" if self.payload is None else f", payload_mass={self.payload.mass!r}"
@@ -91,12 +93,21 @@ class ArmModel:
             self._raise_nonfinite(q, qd, qdd)
         return tau.copy()
 
-    def inverse_dynamics_batch(self, q, qd, qdd) -> np.ndarray:
+    def inverse_dynamics_batch(self, q, qd, qdd, check_ranges: bool = True) -> np.ndarray:
+        """(N, nv) inputs -> (N, nv) torques. A recording whose angles lie far outside the
+        joints' ranges (degrees given as radians; forearm_dynamics/ranges.py) is refused with
+        a ValueError naming units; check_ranges=False computes it all the same (a test of
+        arbitrary states, or the torques a wrong recording would give)."""
         q, qd, qdd = (np.ascontiguousarray(x, dtype=np.float64) for x in (q, qd, qdd))
         if q.ndim != 2 or q.shape[1] != self.nv or qd.shape != q.shape or qdd.shape != q.shape:
             self._raise_shape(q, qd, qdd)
         if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
             self._raise_nonfinite(q, qd, qdd)
+        if check_ranges:
+            if self._ranges is None:
+                self._ranges = AngleRanges.of(self.joint_names)
+            if self._ranges.far(q).any():
+                raise ValueError("inverse_dynamics: " + far_refusal(q, self._ranges, "q"))
         out = np.empty_like(q)
         model, data, rnea = self.model, self.data, pin.rnea
         for k in range(q.shape[0]):

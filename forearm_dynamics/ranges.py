@@ -60,9 +60,11 @@ class AngleRanges:
 
     @classmethod
     def of(cls, joint_names: Sequence[str]) -> AngleRanges:
+        """A joint without a range in model.yaml (one a later model adds) gets -pi..pi: only
+        |q| > 2*pi is far for it."""
         ranges = load_description().ranges
-        lo = np.array([ranges[n][0] for n in joint_names], float)
-        hi = np.array([ranges[n][1] for n in joint_names], float)
+        lo = np.array([ranges.get(n, (-math.pi, math.pi))[0] for n in joint_names], float)
+        hi = np.array([ranges.get(n, (-math.pi, math.pi))[1] for n in joint_names], float)
         return cls(tuple(joint_names), lo, hi)
 
     @property
@@ -104,6 +106,20 @@ def _deg(x: float) -> str:
     return f"{x:.4g} rad ({math.degrees(x):.4g} deg)"
 
 
+def far_refusal(q: np.ndarray, rng: AngleRanges, source: str,
+                use: np.ndarray | None = None) -> str:
+    """The one line for angles (N, J) far outside their ranges: the first such joint, its
+    largest value and row, how many joints and samples, and units."""
+    q = np.atleast_2d(q)
+    far = rng.far(q) if use is None else rng.far(q) & use
+    cols = np.flatnonzero(far.any(axis=0))
+    j = int(cols[0])
+    k = int(np.argmax(np.abs(q[:, j])))
+    return (f"{source}: {rng.names[j]} is {_deg(float(q[k, j]))} (row {k + 1}), far outside its "
+            f"{rng.describe(j)} ({len(cols)} joint(s), {int(far.any(axis=1).sum())} of {len(q)} "
+            f"samples far out); {UNITS_HINT}")
+
+
 def check_recording(q: np.ndarray, joint_names: Sequence[str], *, source: str,
                     measured: Sequence[bool] | None = None,
                     as_given: np.ndarray | None = None) -> RangeReport:
@@ -119,16 +135,9 @@ def check_recording(q: np.ndarray, joint_names: Sequence[str], *, source: str,
     if not use.any() or q.size == 0:
         return rep
     finite = np.where(np.isfinite(q), q, 0.0)
-    far = rng.far(finite) & use
-    if far.any():
-        cols = np.flatnonzero(far.any(axis=0))
-        rep.far_joints = [joint_names[j] for j in cols]
-        j = int(cols[0])
-        k = int(np.argmax(np.abs(finite[:, j])))
-        n_rows = int(far.any(axis=1).sum())
-        rep.refusal = (f"{source}: {joint_names[j]} is {_deg(finite[k, j])} (row {k + 1}), far outside "
-                       f"its {rng.describe(j)} ({len(cols)} joint(s), {n_rows} of {len(q)} samples "
-                       f"far out); {UNITS_HINT}")
+    if (rng.far(finite) & use).any():
+        rep.refusal = far_refusal(finite, rng, source, use)
+        rep.far_joints = [joint_names[j] for j in np.flatnonzero((rng.far(finite) & use).any(axis=0))]
         return rep
     qa = (finite if as_given is None else np.atleast_2d(np.asarray(as_given, float)))[:, use]
     if len(q) > 1 and np.abs(qa).max() <= TINY_RAD and np.ptp(qa, axis=0).max() >= TINY_MOTION_RAD:
