@@ -139,7 +139,7 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
         return report
     gap = max(int(10 * np.median(np.diff(s_t))), 100_000_000)
     q, qd, qdd = zero_phase(s_t, s_q, cutoff, gap)
-    ref = arm.inverse_dynamics_batch(q, qd, qdd, check_ranges=False)  # units: judged above
+    ref = arm.inverse_dynamics_batch(q, qd, qdd, check_ranges="off")  # units: judged above
     t_u, it = np.unique(torques.stamp_ns, return_index=True)
     common, ia, ib = np.intersect1d(s_t, t_u, assume_unique=True, return_indices=True)
     report.samples = len(common)
