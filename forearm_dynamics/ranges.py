@@ -13,7 +13,7 @@ AAOS, elbow from the paper); a joint's width w = upper - lower. Three bands:
 - far outside: |q| > 2*pi (no joint of the model turns a full circle: such a value is
   never an angle in radians), or outside the range by more than FAR_WIDTHS x w. Refused,
   with a line that names units. Degrees read as radians are far outside for any joint
-  angle beyond 1.5-6.3 deg (thumb CMC flexion 1.5, elbow 6.3): every movement of the library.
+  angle beyond 2.1-6.3 deg (thumb CMC flexion 2.1, elbow 6.3): every movement of the library.
 
 Radians converted twice (values 57.3 x too small) stay inside every range; a whole
 recording shows it (`tiny_recording`): every angle within +-TINY_RAD while some joint moves
@@ -37,7 +37,7 @@ from .description import load_description
 #: moderately outside: beyond the range by more than this fraction of its width
 WARN_FRACTION = 0.25
 #: far outside: beyond the range by more than this many widths (or |q| > 2*pi)
-FAR_WIDTHS = 2.0
+FAR_WIDTHS = 3.0
 #: a recording whose every angle is within this (rad) = pi degrees, ...
 TINY_RAD = math.pi * math.pi / 180.0
 #: ... while some joint moves by at least this much (rad): 0.1 deg (a 5.7 deg swing

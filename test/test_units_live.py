@@ -41,6 +41,9 @@ def test_live_stream_of_degrees_is_refused_naming_units(procs):
         assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), proc.output()
         assert peer.spin_until(lambda: node.count_subscribers("joint_torques") >= 1
                                and node.count_publishers("joint_torques") >= 1, rosproc.STARTUP_S)
+        # the node's start-up lines end with the model's ("... config on /torque_node/config");
+        # its subscription may match before it is logged: wait for it (a hang guard)
+        assert proc.wait_for_output("config on", rosproc.STARTUP_S), proc.output()
         mark = len(proc.output())
         mv = movement_library()[0]
         t = mv.sample_times(1000.0)[:300]
