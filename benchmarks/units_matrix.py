@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 import warnings
 from pathlib import Path
@@ -100,6 +101,23 @@ def run(rate: float) -> dict:
     return out
 
 
+def guard_cost(n: int = 100_000) -> dict:
+    """The node's per-sample price of the check (SampleGuard.check on an in-range sample)
+    beside pin.rnea of the same model in the same run (median of 5 repeats, us)."""
+    import timeit
+
+    import pinocchio as pin
+
+    arm = model_from_config(None).arm
+    q, z = np.full(20, 0.3), np.zeros(20)
+    guard = SampleGuard(JOINT_NAMES)
+    check = sorted(timeit.repeat(lambda: guard.check(q), number=n, repeat=5))[2] / n * 1e6
+    rnea = sorted(timeit.repeat(lambda: pin.rnea(arm.model, arm.data, q, z, z), number=n,
+                                repeat=5))[2] / n * 1e6
+    return {"guard_check_us": check, "rnea_us": rnea, "ratio": check / rnea,
+            "load_average": list(os.getloadavg())}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rate", type=float, default=100.0)
@@ -114,6 +132,10 @@ def main() -> None:
               f"{r['live_first_sample']:>9} {r['api_warned']:>11} {r['api']:>10}")
     print(f"correct units, check_bag PASS: {res['correct']['bag_pass']} of {res['correct']['n']}; "
           f"{time.perf_counter() - t0:.1f} s")
+    cost = res["node_cost"] = guard_cost()
+    print(f"torque_node's check per sample: {cost['guard_check_us']:.2f} us, pin.rnea "
+          f"{cost['rnea_us']:.2f} us in the same run (ratio {cost['ratio']:.2f}); load "
+          f"{cost['load_average'][0]:.1f}")
     if args.json:
         args.json.write_text(json.dumps(res, indent=1) + "\n")
 
