@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -13,6 +14,7 @@ from .builders import ForearmPlacement, build_tree, resolve_placement
 from .description import load_description
 from .hand import grasp_point
 from .payload import Payload, make_payload
+from .ranges import AngleRanges, far_refusal
 from .shoulder import ShoulderConvention, convention
 from .tree import KinematicTree
 
@@ -85,6 +87,7 @@ class ArmModel:
         self.model = pinocchio_model(tree)
         self.data = self.model.createData()
         self._one = (self.nv,)
+        self._ranges = None  # ranges.AngleRanges, made on the first batch
 
     def __repr__(self) -> str:
         payload = "" if self.payload is None else f", payload_mass={self.payload.mass!r}"
@@ -109,12 +112,27 @@ class ArmModel:
             self._raise_nonfinite(q, qd, qdd)
         return tau.copy()
 
-    def inverse_dynamics_batch(self, q, qd, qdd) -> np.ndarray:
+    def inverse_dynamics_batch(self, q, qd, qdd, check_ranges: str = "warn") -> np.ndarray:
+        """(N, nv) inputs -> (N, nv) torques. Angles far outside the joints' ranges (degrees
+        given as radians; forearm_dynamics/ranges.py) are said in one line naming units:
+        check_ranges "warn" (default: a UserWarning; the model is also used for arbitrary
+        states, engine comparisons and sampling, which must not be refused), "raise" (a
+        ValueError: refuse, as the command-line tools and the node do) or "off"."""
         q, qd, qdd = (np.ascontiguousarray(x, dtype=np.float64) for x in (q, qd, qdd))
         if q.ndim != 2 or q.shape[1] != self.nv or qd.shape != q.shape or qdd.shape != q.shape:
             self._raise_shape(q, qd, qdd)
         if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
             self._raise_nonfinite(q, qd, qdd)
+        if check_ranges != "off":
+            if check_ranges not in ("warn", "raise"):
+                raise ValueError(f"check_ranges must be 'warn', 'raise' or 'off', got {check_ranges!r}")
+            if self._ranges is None:
+                self._ranges = AngleRanges.of(self.joint_names)
+            if self._ranges.far(q).any():
+                line = "inverse_dynamics: " + far_refusal(q, self._ranges, "q")
+                if check_ranges == "raise":
+                    raise ValueError(line)
+                warnings.warn(line, UserWarning, stacklevel=2)
         out = np.empty_like(q)
         model, data, rnea = self.model, self.data, pin.rnea
         for k in range(q.shape[0]):

@@ -15,6 +15,12 @@ Output sensor_msgs/JointState on `joint_torques`: the model's 20 joints in joint
        nothing is published (said in /diagnostics): never a stale repeat, never an
        extrapolation beyond input_timeout.
 
+Angles are checked against the joints' ranges (forearm_dynamics/ranges.py, the check every
+input path shares): a sample far outside (degrees sent as radians) is rejected
+(angle_out_of_range) with a line naming units, and /diagnostics turns ERROR while such
+samples come; a joint moderately outside is warned about once; a stream whose first 1 s
+stay within +-3 deg while moving (radians converted twice) is warned about once (WARN).
+
 Velocity and acceleration come from the state estimator (parameter `estimator`, settings
 `estimator.<name>`; forearm_dynamics/estimation). Bad samples are dropped and counted per
 reason (validation.py); stamp jumps beyond max_stamp_gap reset the estimator
@@ -53,6 +59,7 @@ from std_msgs.msg import String
 from ..description import JOINT_NAMES
 from ..estimation.stamps import MIN_SUPPORTED_RATE_HZ, rate_note
 from ..model_config import config_message
+from ..ranges import SampleGuard
 from ..shoulder import ENU_TO_WORLD, angles_from_rotation, convention, quaternion_matrix
 from ..version import package_version
 from . import validation as v
@@ -214,6 +221,8 @@ class TorqueNode(JointStreamNode):
             self._hold_posture = np.array([params.value(f"hold_posture.{j}") if j in JOINT_NAMES
                                            else 0.0 for j in bundle.arm.joint_names])
         self.live = LiveModel(bundle, make, self.config_message)
+        self._guard = SampleGuard(bundle.arm.joint_names)
+        self._far_seen = 0  # guard.far_count at the last /diagnostics
         # output_rate_hz > 0: whether the estimator holds a state to predict from, the input clock
         self._have_state = False
         self._last_in_ns = 0  # receive time of the last input (system clock)
@@ -226,6 +235,16 @@ class TorqueNode(JointStreamNode):
 
     # -- the hot path --------------------------------------------------------------------
     def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool | None:
+        guard = self._guard
+        why = guard.check(self.q)  # 4 numpy calls when every angle is in range
+        if why is not None:  # before the estimator: its history keeps only real angles
+            raise v.Rejection(v.ANGLE_OUT_OF_RANGE, why)
+        if guard.pending_warnings:
+            for w in guard.pending_warnings:
+                self.get_logger().warning(w)
+            guard.pending_warnings.clear()
+        if not guard.window_done and guard.observe(t_ns, self.q):
+            self.get_logger().warning(guard.tiny_warning)
         b, fresh = self.live.current()  # a live change built: swapped in between two samples
         if fresh:
             self._have_state = False
@@ -475,6 +494,17 @@ class TorqueNode(JointStreamNode):
             **{f"live_changes.{k}": str(n) for k, n in self.live.counts().items()},
             **rate,
         }
+        guard = self._guard
+        if guard.far_count > self._far_seen:
+            status.level = status.ERROR
+            status.message = (f"{guard.far_count - self._far_seen} sample(s) with angles far outside "
+                              "the joints' ranges: check units (degrees as radians?)")
+            self._far_seen = guard.far_count
+        elif guard.tiny_warning:
+            status.level = max(status.level, status.WARN)
+            status.message = "angles all within +-3 deg while moving: check units (radians twice?)"
+        extra["angles_far_out_of_range"] = str(guard.far_count)
+        extra["angles_warned"] = ", ".join(sorted(guard.warned)) or "none"
         if self.output_rate_hz > 0:
             extra.update({f"timer_skipped.{k}": str(n) for k, n in self.timer_skipped.items()})
             if self._silent in ("input_timeout", "stamps_behind"):

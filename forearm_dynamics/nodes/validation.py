@@ -37,6 +37,8 @@ TOO_MANY_NAMES = "too_many_names"  # more than MAX_NAMES names (bounded work and
 STAMP_INVALID = "stamp_invalid"  # negative, or nanosec outside [0, 1e9)
 STAMP_IN_FUTURE = "stamp_in_future"  # more than FUTURE_TOLERANCE_S ahead of this node's clock
 NO_IMU = "no_imu"  # the shoulder comes from an Imu (imu_topic) and none has arrived yet
+#: a position far outside its joint's range (forearm_dynamics/ranges.py): degrees as radians
+ANGLE_OUT_OF_RANGE = "angle_out_of_range"
 
 #: Names a message may carry (the model's 20 and others, ignored). A real robot has tens;
 #: the limit bounds the per-message work and the name-list cache (16 lists) at ~1 MB.
@@ -60,6 +62,7 @@ REASONS = (
     STAMP_INVALID,
     STAMP_IN_FUTURE,
     NO_IMU,
+    ANGLE_OUT_OF_RANGE,
 )
 
 

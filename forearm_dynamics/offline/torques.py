@@ -47,6 +47,7 @@ from ..estimation import ESTIMATORS as NODE_ESTIMATORS
 from ..estimation.offline import backward_batch, zero_phase
 from ..estimation.stamps import StampRule, rate_note, resets
 from ..filtering import analysis_config, usable_cutoff
+from ..ranges import check_recording
 from ..uncertainty import NoCovariance, TorqueStd
 from ..version import package_version
 
@@ -127,6 +128,10 @@ def compute(stream: JointSeries, arm: ArmModel, estimator: str = DEFAULT_ESTIMAT
     idx = idx[keep]
     dropped = len(stream.stamp_ns) - len(idx)
     t, q = stream.stamp_ns[idx], stream.position[idx]
+    units = check_recording(q, arm.joint_names, source=f"{stream.topic} positions")
+    if units.refusal:  # degrees as radians (or radians twice): torques of nothing real
+        raise UsageError(units.refusal + "; nothing written")
+    warnings += units.warnings
     has_v = stream.has_velocity[idx]
     start = time.perf_counter()
     std_out, std_config = None, {"published": False, "why": "not asked for (--no-std)"}
