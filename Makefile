@@ -50,9 +50,11 @@ demo: setup
 # The virtual arm in closed loop (docs/virtual-arm.md): trajectory_publisher + torque_node +
 # arm_sim + a computed-torque controller; prints the tracking error, draws
 # demo_out/closed_loop/closed_loop.png. CLOSED_LOOP_ARGS="--lockstep" runs it on arm_sim's clock.
+# ROS_DOMAIN_ID as for make demo (unset or 0: 74; held, moved on if another run holds it).
 CLOSED_LOOP_ARGS ?=
+CLOSED_LOOP_DOMAIN = $(if $(filter-out 0,$(ROS_DOMAIN_ID)),$(ROS_DOMAIN_ID),74)
 demo-closed-loop: setup
-	$(PY) examples/closed_loop.py --movements 1,26,51 --domain 74 --out demo_out/closed_loop --plot $(CLOSED_LOOP_ARGS)
+	$(PY) examples/closed_loop.py --movements 1,26,51 --domain $(CLOSED_LOOP_DOMAIN) --out demo_out/closed_loop --plot $(CLOSED_LOOP_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check .
