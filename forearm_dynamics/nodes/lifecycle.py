@@ -41,6 +41,7 @@ import time
 
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
@@ -155,6 +156,12 @@ class ManagedTorqueNode(TorqueNode, LifecycleNode):
     def on_configure(self, _state: LifecycleState) -> TransitionCallbackReturn:
         t0 = time.perf_counter()
         given = {n: self.get_parameter(n).value for n in self.list_parameters([], 0).names}
+        # The values the node holds now (given at start-up, set while unconfigured, or kept
+        # from the last configuration) are what the Specs' declarations take, as the command
+        # line's were at start-up: rclpy's declare_parameter applies its override table
+        # (Node._parameter_overrides, the one place it keeps them), so it is brought up to date.
+        self._parameter_overrides.update({n: Parameter(n, value=v) for n, v in given.items()
+                                          if v is not None})
         self._entities = self._snapshot()
         try:
             TorqueNode.__init__(self, self.get_name())  # the plain node's start-up
