@@ -12,6 +12,7 @@ written beside the bag (check.json).
 
 import os
 import signal
+import sys
 import time
 
 from launch.actions import (
@@ -21,7 +22,6 @@ from launch.actions import (
     LogInfo,
     OpaqueFunction,
     RegisterEventHandler,
-    TimerAction,
 )
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
@@ -32,6 +32,28 @@ from launch_ros.substitutions import ExecutableInPackage
 from launch import LaunchDescription
 
 PACKAGE = "forearm_dynamics"
+QUIET_S = 2.0
+
+#: Ends once joint_torques has been quiet for argv[1] s (a hang guard: 300 s at most).
+SETTLE = """
+import sys, time
+import rclpy
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import JointState
+quiet = float(sys.argv[1])
+rclpy.init()
+node = rclpy.create_node("demo_wait_for_last_answers")
+last = [None]  # the newest answer seen (monotonic s); from 1 s after the node was seen
+node.create_subscription(JointState, "joint_torques", lambda m: last.__setitem__(0, time.monotonic()),
+                         QoSProfile(depth=1000))
+end = time.monotonic() + 300
+while time.monotonic() < end and (last[0] is None or time.monotonic() - last[0] < quiet):
+    rclpy.spin_once(node, timeout_sec=0.1)
+    if last[0] is None and node.count_publishers("joint_torques"):
+        last[0] = time.monotonic() + 1.0  # its writer seen: our reader is matched within ~1 s
+node.destroy_node()
+rclpy.try_shutdown()
+"""
 
 
 def movement_ids(text: str) -> list[int]:
@@ -54,6 +76,8 @@ def setup(context) -> list:
     replay = {"loop": False, "min_subscribers": 2, **({"movements": ids} if ids else {})}
     publisher = Node(package=PACKAGE, executable="trajectory_publisher", parameters=[replay],
                      output="screen", emulate_tty=True)
+    settle = ExecuteProcess(cmd=[sys.executable, "-c", SETTLE, str(QUIET_S)], output="screen",
+                            name="wait_for_last_answers")
     check = ExecuteProcess(
         cmd=[ExecutableInPackage("check_bag", PACKAGE), bag, "--json", os.path.join(out, "check.json")],
         output="screen", name="check_bag")
@@ -65,9 +89,12 @@ def setup(context) -> list:
     return [
         LogInfo(msg=f"demo: replaying {len(ids) or 65} movements; bag {bag}"),
         torque, recorder, publisher,
-        # the replay is over: let the last answers reach the recorder, then stop both nodes
-        RegisterEventHandler(OnProcessExit(target_action=publisher, on_exit=[
-            TimerAction(period=1.0, actions=[stop(torque), stop(recorder)])])),
+        # the replay is over: once the torque node has answered its last sample (its output
+        # quiet for QUIET_S: a loaded machine may hold a backlog of a second or more), stop
+        # both nodes
+        RegisterEventHandler(OnProcessExit(target_action=publisher, on_exit=[settle])),
+        RegisterEventHandler(OnProcessExit(target_action=settle, on_exit=[
+            stop(torque), stop(recorder)])),
         # the bag is complete once the recorder has exited: check it
         RegisterEventHandler(OnProcessExit(target_action=recorder, on_exit=[check])),
         RegisterEventHandler(OnProcessExit(target_action=check, on_exit=[
