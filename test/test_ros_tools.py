@@ -39,7 +39,7 @@ def _documented_args() -> dict[str, set[str]]:
     """docs/ros.md's table: launch file -> the arguments it documents."""
     text = (REPO / "docs" / "ros.md").read_text()
     out: dict[str, set[str]] = {}
-    for m in re.finditer(r"^\| `(\w+)\.launch\.py` \| ([^|]*) \|", text, re.M):
+    for m in re.finditer(r"^\| `(\w+)\.launch\.py` \| ([^|]*) \|", text, re.MULTILINE):
         out[m.group(1)] = set(re.findall(r"`(\w+)`", m.group(2)))
     return out
 
@@ -160,7 +160,7 @@ def test_show_args_lists_the_documented_arguments(ros_env_base) -> None:
     for file in LAUNCH_FILES:
         r = ros2(env, "launch", "forearm_dynamics", f"{file}.launch.py", "--show-args")
         assert r.returncode == 0, r.stdout + r.stderr
-        shown = dict(re.findall(r"^    '(\w+)':\n        (.+)$", r.stdout, re.M))
+        shown = dict(re.findall(r"^    '(\w+)':\n        (.+)$", r.stdout, re.MULTILINE))
         assert documented[file] <= set(shown), (file, documented[file] - set(shown), r.stdout)
         assert all(desc.strip() and "no description" not in desc for desc in shown.values()), r.stdout
 
