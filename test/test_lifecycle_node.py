@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import rosproc
 from diagnostic_msgs.msg import DiagnosticArray
-from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.msg import Transition, TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
@@ -55,6 +55,9 @@ class Supervisor:
         n.create_subscription(String, "/torque_node/config",
                               lambda m: self.config.update(json.loads(m.data)), latched)
         self.diag: list[str] = []
+        self.events: list[str] = []  # ~/transition_event: the goal states, in order
+        n.create_subscription(TransitionEvent, "/torque_node/transition_event",
+                              lambda m: self.events.append(m.goal_state.label), 100)
         n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
         self.msg = JointState(name=list(JOINT_NAMES), position=POSTURE.tolist(), velocity=[0.0] * 20)
         self.feeding = False
@@ -161,6 +164,8 @@ def test_lifecycle_walk_refusal_and_gating(procs) -> None:
         assert sup.drain(after), f"{len(set(after) - set(sup.torques))} of {len(after)} unanswered"
         assert sup.peer.spin_until(lambda: "active" in sup.diag, WAIT_S), sup.diag
         assert "inactive" in sup.diag
+        walk = [e for e in sup.events if e in ("inactive", "active", "unconfigured")]
+        assert walk[-4:] == ["inactive", "active", "inactive", "active"], sup.events
 
         ok, times["shutdown"], _ = sup.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
         assert ok
