@@ -207,12 +207,15 @@ def _feed_and_listen(peer, count: int, topic_out: str = "joint_torques") -> tupl
     peer.spin_for(1.0)  # the node's reader matched this writer too (discovery both ways)
     msg = JointState(name=list(JOINT_NAMES), position=[0.2] * 20, velocity=[0.0] * 20)
     sent = []
-    for _ in range(count):
+    for k in range(count):
         ns = time.time_ns()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 10**9)
         pub.publish(msg)
         sent.append(ns)
         peer.spin_for(0.002)
+        if k % 100 == 99:  # paced by the answers: a node stalled by load never falls a
+            # whole queue (qos_depth 1000) behind, which would drop samples by design
+            peer.spin_until(lambda t=ns: t in answered, WAIT_S)
     peer.spin_until(lambda: set(sent) <= answered, WAIT_S)
     return sent, answered
 
@@ -327,7 +330,12 @@ def test_lifecycle_walk_with_ros2_lifecycle(ros_env_base, tmp_path) -> None:
 
     domain = rosproc.test_domain(140, 160)
     env = env_for(ros_env_base, domain)
-    launch = Launch(env, tmp_path, "torque_node", "managed:=true", "estimator:=backward")
+    # a queue of 100 s at this feed: a node stalled by load (seconds at load 15 on 2 cores)
+    # catches up instead of dropping samples by design (KEEP_LAST, qos_depth)
+    params = tmp_path / "deep.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    qos_depth: 25000\n")
+    launch = Launch(env, tmp_path, "torque_node", "managed:=true", "estimator:=backward",
+                    f"params_file:={params}")
     peer = _peer(domain)
     torques: list[tuple[int, int]] = []  # (stamp, receive time)
     try:
