@@ -285,20 +285,33 @@ def test_demo_launch_replays_and_checks(ros_env_base, tmp_path) -> None:
 
 
 def test_viz_launch_publishes_the_arm(ros_env_base, tmp_path) -> None:
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from std_msgs.msg import String
+    """arm_viz answers torques with markers; it offers robot_description."""
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    from forearm_dynamics import JOINT_NAMES
 
     domain = rosproc.test_domain(140, 160)
     env = env_for(ros_env_base, domain)
     launch = Launch(env, tmp_path, "viz")
     peer = _peer(domain)
-    got: list[str] = []
+    got: list[int] = []
     try:
-        peer.node.create_subscription(String, "robot_description", lambda m: got.append(m.data),
-                                      QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        assert peer.spin_until(lambda: got, WAIT_S), launch.text()
-        assert "<robot" in got[0]
+        n = peer.node
+        n.create_subscription(MarkerArray, "arm_markers", lambda m: got.append(len(m.markers)),
+                              QoSProfile(depth=10))
+        pub = n.create_publisher(JointState, "joint_torques", QoSProfile(depth=10))
+        msg = JointState(name=list(JOINT_NAMES), position=[0.2] * 20, velocity=[0.0] * 20,
+                         effort=[0.1] * 20)
+
+        def send():
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 10**9)
+            pub.publish(msg)
+
+        n.create_timer(0.05, send)
+        assert peer.spin_until(lambda: got and max(got) > 0, WAIT_S), launch.text()
+        assert n.count_publishers("robot_description") == 1
         pids = launch.children()
         assert launch.stop() == 0, launch.text()[-3000:]
     finally:
