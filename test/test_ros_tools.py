@@ -27,6 +27,8 @@ from pathlib import Path
 import pytest
 import rosproc
 
+from forearm_dynamics.processes import popen
+
 pytestmark = pytest.mark.ros_tools
 
 REPO = Path(__file__).resolve().parents[1]
@@ -80,13 +82,21 @@ def ros2(env: dict, *args: str, timeout: float = 120) -> subprocess.CompletedPro
                           timeout=timeout, check=False)
 
 
+def lifecycle(env: dict, verb: str, *args: str) -> subprocess.CompletedProcess:
+    """`ros2 lifecycle <verb>` without the ros2 daemon (it would outlive the test), asking
+    the graph for 3 s (discovery on loopback takes ~2.5 s)."""
+    return ros2(env, "lifecycle", verb, "--no-daemon", "--spin-time", "3", *args)
+
+
 class Launch:
     """`ros2 launch forearm_dynamics <file>` in a session of its own, output in a file."""
 
     def __init__(self, env: dict, tmp: Path, file: str, *args: str):
         self.log = tmp / f"launch_{file}_{time.monotonic_ns()}.log"
         with self.log.open("wb") as out:
-            self.proc = subprocess.Popen(
+            # processes.popen: SIGINT at its default action even where this run ignores it
+            # (a `make ... &` in a script): `ros2 launch` then ignored the test's Ctrl-C
+            self.proc = popen(
                 [str(VENV_BIN / "ros2"), "launch", "forearm_dynamics", f"{file}.launch.py", *args],
                 env=env, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                 start_new_session=True)
@@ -370,25 +380,24 @@ def test_lifecycle_walk_with_ros2_lifecycle(ros_env_base, tmp_path) -> None:
 
         n.create_timer(0.004, feed)
         deadline = time.monotonic() + WAIT_S
-        while time.monotonic() < deadline and "/torque_node" not in ros2(
-                env, "lifecycle", "nodes", "--no-daemon", "--spin-time", "3").stdout:
+        while time.monotonic() < deadline and "/torque_node" not in lifecycle(env, "nodes").stdout:
             peer.spin_for(0.5)
-        assert ros2(env, "lifecycle", "get", "/torque_node").stdout.startswith("unconfigured")
-        listing = ros2(env, "lifecycle", "list", "/torque_node").stdout
+        assert lifecycle(env, "get", "/torque_node").stdout.startswith("unconfigured")
+        listing = lifecycle(env, "list", "/torque_node").stdout
         assert "configure [1]" in listing, listing
 
         windows: list[tuple[str, int, int]] = []  # (state, from, to): wall clock ns
 
         def walk(transition: str, state: str, seconds: float) -> None:
             t_start = time.time_ns()
-            r = ros2(env, "lifecycle", "set", "/torque_node", transition)
+            r = lifecycle(env, "set", "/torque_node", transition)
             assert r.returncode == 0 and "Transitioning successful" in r.stdout, r.stdout + r.stderr
             t_done = time.time_ns()
             if windows:
                 windows[-1] = (windows[-1][0], windows[-1][1], t_start)
             windows.append((state, t_done, 0))
             peer.spin_for(seconds)
-            got = ros2(env, "lifecycle", "get", "/torque_node").stdout
+            got = lifecycle(env, "get", "/torque_node").stdout
             assert got.startswith(state), got
 
         walk("configure", "inactive", 3.0)
@@ -398,7 +407,7 @@ def test_lifecycle_walk_with_ros2_lifecycle(ros_env_base, tmp_path) -> None:
         feeding[0] = False
         peer.spin_for(2.0)
         windows[-1] = (windows[-1][0], windows[-1][1], time.time_ns())
-        r = ros2(env, "lifecycle", "set", "/torque_node", "shutdown")
+        r = lifecycle(env, "set", "/torque_node", "shutdown")
         assert r.returncode == 0, r.stdout + r.stderr
         pids = launch.children()
         assert launch.wait() == 0, launch.text()[-3000:]  # the node exits 0, launch with it

@@ -22,6 +22,8 @@ import pytest
 import rosproc
 from rosbags.highlevel import AnyReader
 
+from forearm_dynamics.processes import popen
+
 pytestmark = [pytest.mark.ros, pytest.mark.faults]
 
 WAIT_S = rosproc.STARTUP_S  # hang guard
@@ -66,8 +68,8 @@ NODES = {
 
 def _start(argv: list[str], env: dict, log: Path) -> subprocess.Popen:
     with log.open("wb") as out:
-        return subprocess.Popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True)
+        return popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,  # SIGINT not ignored
+                     stdin=subprocess.DEVNULL, start_new_session=True)
 
 
 @pytest.mark.parametrize("name", list(NODES))
