@@ -14,6 +14,7 @@ EXECUTABLES = {
     "check_bag": "forearm_dynamics.cli.check_bag:main",
     "demo": "forearm_dynamics.cli.demo:main",
     "torque_node": "forearm_dynamics.nodes.torque_node:main",
+    "torque_lifecycle_node": "forearm_dynamics.nodes.lifecycle:main",
     "arm_sim": "forearm_dynamics.nodes.arm_sim:main",
     "trajectory_publisher": "forearm_dynamics.nodes.trajectory_publisher:main",
     "bag_recorder": "forearm_dynamics.nodes.bag_recorder:main",
@@ -35,6 +36,8 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml") + glob("config/*.json")),
         (f"share/{PACKAGE}/config/nodes", glob("config/nodes/*.yaml")),  # node parameters
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),  # ros2 launch (docs/ros.md)
+        (f"share/{PACKAGE}/examples", ["examples/closed_loop.py"]),  # closed_loop.launch.py runs it
     ],
     package_data={PACKAGE: ["data/*"]},
     python_requires=">=3.10",

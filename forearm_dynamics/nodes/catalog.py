@@ -37,6 +37,11 @@ NODES: dict[str, tuple[str, str, str]] = {
                 "arm markers (MarkerArray) from joint_torques and the torque node's config"),
 }
 
+#: executables that take another node's parameters (the same Specs, the same config file)
+SAME_PARAMETERS: dict[str, str] = {
+    "torque_lifecycle_node": "torque_node",  # the managed torque node (nodes/lifecycle.py)
+}
+
 ROOT = Path(__file__).resolve().parents[2]
 COMMAND = "python -m forearm_dynamics.nodes.catalog --write"
 

@@ -151,7 +151,7 @@ class JointStreamNode(RealtimeNode, Node):
     config_name: str = ""  # config/<config_name>.yaml holds the defaults
 
     def __init__(self, node_name: str):
-        init_node(self, node_name)
+        self._init_ros_node(node_name)
         self.params = Params(self, self.specs, self.config_name or node_name)
         self.settings = StreamSettings.from_params(self.params)
         self.executor_kind = self.settings.executor
@@ -203,6 +203,11 @@ class JointStreamNode(RealtimeNode, Node):
             f"(depth {s.qos_depth}, {_rel(s.input_reliable, s.output_reliable)}, "
             f"{s.executor} executor)"
         )
+
+    def _init_ros_node(self, node_name: str) -> None:
+        """rclpy's Node.__init__ (params.init_node); the managed node (lifecycle.py) made its
+        rclpy node before and runs this constructor as its configure transition."""
+        init_node(self, node_name)
 
     def summary(self) -> str:
         """One line for the log at shutdown: processed, rejected by reason, warm-up, resets."""
