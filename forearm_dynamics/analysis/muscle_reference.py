@@ -142,7 +142,7 @@ class MuscleFigures:
                 "max_force_rms_pct": float(np.nanmax(self.force_rms_pct))
                 if np.isfinite(self.force_rms_pct).any() else None,
                 "min_correlation": float(corr.min()) if len(corr) else None,
-                "muscles_correlated": int(len(corr)), "passes": self.passes(),
+                "muscles_correlated": len(corr), "passes": self.passes(),
                 "worst": self.worst()}
 
 

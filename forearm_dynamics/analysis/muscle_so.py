@@ -281,7 +281,7 @@ def run_static_optimization(model, mm: MuscleModel, t: np.ndarray, q: np.ndarray
         d = Path(workdir or tmp)
         mot = d / "coordinates.mot"
         write_table(mot, "coordinates", list(JOINT_NAMES), t, q)
-        step = int(round(np.median(np.diff(solve_times)) / np.median(np.diff(t))))
+        step = round(np.median(np.diff(solve_times)) / np.median(np.diff(t)))
         tool = osim.AnalyzeTool()
         tool.setName("so")
         tool.setModel(model)
@@ -336,7 +336,7 @@ def model_digest(mm: MuscleModel) -> str:
 # -- the reference: OpenSim's SO of the library's movements, and ours on the same frames ------
 def solve_times(duration: float, rate_hz: float = RATE_HZ) -> np.ndarray:
     """The frames SO solves: every 1/rate_hz s, EDGE_S away from the movement's ends."""
-    n = int(math.floor((duration - 2 * EDGE_S) * rate_hz + 1e-9)) + 1
+    n = math.floor((duration - 2 * EDGE_S) * rate_hz + 1e-9) + 1
     return EDGE_S + np.arange(n) / rate_hz
 
 
