@@ -29,6 +29,10 @@ from .model import MuscleModel, MuscleModelError, _posture
 
 _INF = 1e30  # daqp's infinity
 _EQ = 5  # daqp sense: ACTIVE | IMMUTABLE = an equality constraint
+# daqp's bound tolerance (default 1e-6 in activation): an activation that ends 1e-6 outside
+# [0, 1] and is clipped moves its torque by up to 1e-6 · F0 · r ≈ 1e-5 N·m; 1e-9 keeps the
+# torque balance within 1e-6 N·m (equalities are exact in an active-set solver).
+_SETTINGS = {"primal_tol": 1e-9}
 
 
 @dataclass(frozen=True)
@@ -98,17 +102,20 @@ class StaticOptimizer:
         self._bl[-self._nj:] = rhs
         return unit, pas
 
+    def _cold(self):
+        self._qp = daqp.Model()
+        self._qp.setup(self._H, self._f, self._A, self._bu, self._bl, self._sense)
+        self._qp.settings = _SETTINGS
+
     def _run(self):
         t0 = time.perf_counter()
         if self._qp is None:
-            self._qp = daqp.Model()
-            self._qp.setup(self._H, self._f, self._A, self._bu, self._bl, self._sense)
+            self._cold()
         else:
             self._qp.update(A=self._A, bupper=self._bu, blower=self._bl)
         x, _, flag, info = self._qp.solve()
         if flag < 1:  # a warm start gone wrong: solve once more from scratch
-            self._qp = daqp.Model()
-            self._qp.setup(self._H, self._f, self._A, self._bu, self._bl, self._sense)
+            self._cold()
             x, _, flag, info = self._qp.solve()
         return np.array(x), int(flag), int(info.get("iterations", 0)), time.perf_counter() - t0
 
