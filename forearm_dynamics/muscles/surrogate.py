@@ -7,8 +7,9 @@ normalised joint angles x = (q − centre) / half_range of the fit box (the READ
 a posture outside the box is held at its edge (x clipped to [−1, 1]): polynomials do not
 extrapolate, and the geometry there was not fitted.
 
-Evaluation: every distinct monomial of every muscle is evaluated once (products of at most
-`degree` factors of [1, x0..x19], gathered by index), then one sparse matrix maps the
+Evaluation: every distinct monomial of every muscle is evaluated once, degree by degree (a
+monomial of degree d = one of degree d − 1 times one variable: the set of each muscle's
+monomials of total degree <= D holds every such parent), then one sparse matrix maps the
 monomials to the n lengths and the spanned (muscle, joint) moment arms.
 """
 
@@ -27,17 +28,35 @@ _CHUNK = 2048  # samples per block in the batch path (memory: chunk × monomials
 class Surrogate:
     """Lengths (n,) and moment arms (n, 20) of a posture, from fitted polynomials."""
 
-    def __init__(self, center: np.ndarray, half: np.ndarray, factors: np.ndarray,
+    def __init__(self, center: np.ndarray, half: np.ndarray, keys: list[tuple[int, ...]],
                  coef: sparse.csr_matrix, pair_rows: np.ndarray, pair_cols: np.ndarray,
                  n: int):
+        """keys: the monomials' exponent tuples (20 ints), sorted by degree, the constant
+        first; coef's columns in that order."""
         self.center = center
         self.inv_half = 1.0 / half
-        self.factors = factors  # (degree, K) indices into [1, x0..x19]
         self.coef = coef  # (n + n_pairs, K)
         self.pair_rows, self.pair_cols = pair_rows, pair_cols
         self.pair_flat = pair_rows * len(JOINT_NAMES) + pair_cols
         self.n = n
         self._xe = np.ones(len(JOINT_NAMES) + 1)
+        self._mono = np.ones(len(keys))
+        pos = {k: i for i, k in enumerate(keys)}
+        degree = np.array([sum(k) for k in keys])
+        if len(keys) == 0 or degree[0] != 0 or np.any(np.diff(degree) < 0):
+            raise ValueError("monomials must be sorted by degree, the constant first")
+        self.levels = []  # (slice, parent positions, variable index into [1, x...])
+        for d in range(1, int(degree.max()) + 1):
+            at = np.nonzero(degree == d)[0]
+            parents, var = [], []
+            for i in at:
+                k = list(keys[i])
+                j = next(j for j, e in enumerate(k) if e)
+                k[j] -= 1
+                parents.append(pos[tuple(k)])
+                var.append(j + 1)
+            self.levels.append((slice(int(at[0]), int(at[-1]) + 1), np.array(parents),
+                                np.array(var)))
 
     @classmethod
     def from_doc(cls, joints: dict, spans: Sequence[Sequence[str]], rows: Sequence[dict], *,
@@ -87,31 +106,36 @@ class Surrogate:
                 pair_base += 1
         if not np.all(np.isfinite(data)):
             raise ValueError("coefficients must be finite")
-        degree = max(sum(k) for k in index)
-        factors = np.zeros((max(degree, 1), len(index)), int)
-        for key, k in index.items():
-            idx = [j + 1 for j, e in enumerate(key) for _ in range(e)]
-            factors[: len(idx), k] = idx
-        coef = sparse.csr_matrix((data, (ri, ci)), shape=(n + n_pairs, len(index)))
+        keys = sorted(index, key=lambda k: (sum(k), index[k]))
+        order = np.array([index[k] for k in keys])
+        new_col = np.empty(len(keys), int)
+        new_col[order] = np.arange(len(keys))
+        coef = sparse.csr_matrix((data, (ri, new_col[np.asarray(ci, int)])),
+                                 shape=(n + n_pairs, len(keys)))
         coef.sum_duplicates()
-        return cls(center, half, factors, coef, np.asarray(pair_rows), np.asarray(pair_cols), n)
+        return cls(center, half, keys, coef, np.asarray(pair_rows), np.asarray(pair_cols), n)
 
     @property
     def n_monomials(self) -> int:
-        return self.factors.shape[1]
+        return len(self._mono)
 
     def _x(self, q: np.ndarray) -> np.ndarray:
         return np.clip((q - self.center) * self.inv_half, -1.0, 1.0)
 
+    def _monomials(self, xe: np.ndarray, mono: np.ndarray) -> np.ndarray:
+        """Fill mono (..., K) from xe (..., 21) = [1, x], degree by degree."""
+        for sl, parent, var in self.levels:
+            np.multiply(mono[..., parent], xe[..., var], out=mono[..., sl])
+        return mono
+
     def evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One posture (20,) -> (moment arms (n, 20), lengths (n,))."""
         xe = self._xe
-        xe[1:] = self._x(q)
-        f = self.factors
-        mono = xe[f[0]]
-        for k in range(1, f.shape[0]):
-            mono = mono * xe[f[k]]
-        vals = self.coef @ mono
+        np.subtract(q, self.center, out=xe[1:])
+        xe[1:] *= self.inv_half
+        np.minimum(xe, 1.0, out=xe)
+        np.maximum(xe, -1.0, out=xe)
+        vals = self.coef @ self._monomials(xe, self._mono)
         R = np.zeros(self.n * len(JOINT_NAMES))
         R[self.pair_flat] = vals[self.n:]
         return R.reshape(self.n, len(JOINT_NAMES)), vals[: self.n]
@@ -121,9 +145,7 @@ class Surrogate:
         for s in range(0, len(q), _CHUNK):
             x = self._x(q[s:s + _CHUNK])
             xe = np.concatenate([np.ones((len(x), 1)), x], axis=1)
-            mono = xe[:, self.factors[0]]
-            for k in range(1, self.factors.shape[0]):
-                mono *= xe[:, self.factors[k]]
+            mono = self._monomials(xe, np.ones((len(x), self.n_monomials)))
             out[s:s + _CHUNK] = (self.coef @ mono.T).T
         return out
 
