@@ -50,6 +50,7 @@ import numpy as np
 from ..description import JOINT_NAMES
 from ..formats.opensim import write_table
 from ..muscles import MuscleModel
+from ..muscles.model import ARM_JOINTS
 from ..opensim_engine import _osim, build_osim_model
 from ..tree import KinematicTree
 
@@ -65,17 +66,6 @@ EDGE_S = 0.05  # frames this close to a movement's ends are not solved (spline e
 
 
 # -- the surrogate's polynomials as OpenSim functions -------------------------------------
-def _global_exponents(surrogate) -> np.ndarray:
-    """(K, 20) exponents of the surrogate's monomials of the normalised joint angles."""
-    f = surrogate.factors  # (degree, K), indices into [1, x0..x19]
-    exps = np.zeros((f.shape[1], len(JOINT_NAMES)), int)
-    for row in f:
-        for k, idx in enumerate(row):
-            if idx:
-                exps[k, idx - 1] += 1
-    return exps
-
-
 def _expand(coefs: np.ndarray, exps: np.ndarray, center: np.ndarray, half: np.ndarray,
             cols: Sequence[int]) -> dict[tuple[int, ...], float]:
     """Σ_k c_k Π_j ((q_j − centre_j) / half_j)^e_kj as {raw exponents (over cols): coef}."""
@@ -158,24 +148,30 @@ class MusclePolynomials:
 def muscle_polynomials(mm: MuscleModel) -> list[MusclePolynomials]:
     """The shipped surrogate of every muscle, re-expanded in raw joint angles (rad).
 
-    Equal to the surrogate inside its fit box; outside it the surrogate holds the angle at the
-    box's edge and these do not (the reference's movements stay inside: checked by callers)."""
-    s = mm.surrogate
-    exps = _global_exponents(s)
-    center, half = np.asarray(s.center, float), 1.0 / np.asarray(s.inv_half, float)
-    coef = s.coef.toarray()
+    Read from the model's file (its public format: per muscle the exponents over the joints
+    it spans, length and moment-arm coefficients of x = (q - centre) / half_range), scaled
+    by the model's body-size rule (model.py: lengths x forearm or hand ratio, moment arms x
+    the ratio of the joint's segment), so it is what `mm.geometry` evaluates. Equal to the
+    surrogate inside its fit box; outside it the surrogate holds the angle at the box's edge
+    and these do not (the reference's movements stay inside: `in_fit_box`)."""
+    doc = json.loads(Path(mm.path).read_text(encoding="utf-8"))
+    center = np.asarray(doc["joints"]["center"], float)
+    half = np.asarray(doc["joints"]["half_range"], float)
+    fore, hand = mm.scaling.get("forearm_length", 1.0), mm.scaling.get("hand_length", 1.0)
+    rows = {m["name"]: m for m in doc["muscles"]}
     out = []
-    pair = mm.n
-    for m, span in enumerate(mm.spans):
+    for name, span in zip(mm.names, mm.spans, strict=True):
+        sur = rows[name]["surrogate"]
         cols = [JOINT_NAMES.index(j) for j in span]
-        used = np.flatnonzero(coef[m])
-        order = int(exps[used].sum(axis=1).max()) if len(used) else 1
-        length = _expand(coef[m], exps, center, half, cols)
-        arms = []
-        for _ in span:
-            arms.append(_expand(coef[pair], exps, center, half, cols))
-            pair += 1
-        out.append(MusclePolynomials(tuple(span), max(order, 1), length, tuple(arms)))
+        exps = np.zeros((len(sur["exponents"]), len(JOINT_NAMES)), int)
+        exps[:, cols] = np.asarray(sur["exponents"], int)
+        order = max(int(exps.sum(axis=1).max()), 1)
+        l_scale = fore if set(span) & set(ARM_JOINTS) else hand
+        length = _expand(np.asarray(sur["length"], float) * l_scale, exps, center, half, cols)
+        arms = tuple(_expand(np.asarray(sur["moment_arms"][j], float)
+                             * (fore if j in ARM_JOINTS else hand), exps, center, half, cols)
+                     for j in span)
+        out.append(MusclePolynomials(tuple(span), order, length, arms))
     return out
 
 
@@ -323,13 +319,10 @@ def run_static_optimization(model, mm: MuscleModel, t: np.ndarray, q: np.ndarray
 
 
 def model_digest(mm: MuscleModel) -> str:
-    """SHA-256 of everything of the muscle model SO sees (parameters and polynomials): a
-    cached reference made from another model is stale."""
-    h = hashlib.sha256()
-    for a in (*mm.params(), mm.surrogate.center, mm.surrogate.inv_half):
-        h.update(np.ascontiguousarray(a, np.float64).tobytes())
-    h.update(mm.surrogate.coef.toarray().tobytes())
-    h.update(json.dumps([list(mm.names), [list(s) for s in mm.spans]]).encode())
+    """SHA-256 of the muscle model file's bytes, its side, body size and scaling: a cached
+    reference made from another model is stale (and says so)."""
+    h = hashlib.sha256(Path(mm.path).read_bytes())
+    h.update(json.dumps([mm.side, mm.body_size, mm.scaling], sort_keys=True).encode())
     return h.hexdigest()
 
 
