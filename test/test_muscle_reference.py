@@ -131,7 +131,8 @@ def test_bag_muscles_through_real_files(tmp_path):
         w.write(ch, joint_state_bytes(int(stamps[k]), q[k], qd[k], tau[k]), int(stamps[k]))
     w.close()
     r = subprocess.run([sys.executable, "-m", "forearm_dynamics.cli.bag_muscles", str(src),
-                        str(dst), "--decimation", "2"], capture_output=True, text=True, timeout=300, check=False)
+                        str(dst), "--decimation", "2"], capture_output=True, text=True, timeout=300,
+                       check=False)
     assert r.returncode == 0, r.stderr
     mm = load_muscle_model()
     got: dict[str, list] = {"/muscle_forces": [], "/muscle_reserves": []}
@@ -151,5 +152,19 @@ def test_bag_muscles_through_real_files(tmp_path):
     np.testing.assert_array_equal(np.array([m.effort for m in got["/muscle_reserves"]]), off.reserves)
     # a second run on its own output is refused by name, exit 2 (no traceback)
     r2 = subprocess.run([sys.executable, "-m", "forearm_dynamics.cli.bag_muscles", str(dst),
-                         str(tmp_path / "again.mcap")], capture_output=True, text=True, timeout=300, check=False)
+                         str(tmp_path / "again.mcap")], capture_output=True, text=True, timeout=300,
+                        check=False)
     assert r2.returncode == 2 and "muscle_forces" in r2.stderr and "Traceback" not in r2.stderr
+    # bag_export --muscles: the same numbers as columns (CSV read back by numpy)
+    csv = tmp_path / "muscles.csv"
+    r3 = subprocess.run([sys.executable, "-m", "forearm_dynamics.cli.bag_export", str(dst),
+                         "--format", "csv", "--muscles", "--out", str(csv)],
+                        capture_output=True, text=True, timeout=300, check=False)
+    assert r3.returncode == 0, r3.stderr
+    header = csv.read_text().splitlines()[0].split(",")
+    table = np.loadtxt(csv, delimiter=",", skiprows=1)
+    assert header[:2] == ["time", "stamp_ns"] and len(table) == len(want)
+    for i, name in enumerate(mm.names[:5]):
+        np.testing.assert_array_equal(table[:, header.index(f"{name}_activation")], off.activations[:, i])
+        np.testing.assert_array_equal(table[:, header.index(f"{name}_force")], off.forces[:, i])
+    np.testing.assert_array_equal(table[:, header.index("elbow_flexion_reserve")], off.reserves[:, 0])
