@@ -168,3 +168,24 @@ def test_bag_muscles_through_real_files(tmp_path):
         np.testing.assert_array_equal(table[:, header.index(f"{name}_activation")], off.activations[:, i])
         np.testing.assert_array_equal(table[:, header.index(f"{name}_force")], off.forces[:, i])
     np.testing.assert_array_equal(table[:, header.index("elbow_flexion_reserve")], off.reserves[:, 0])
+
+
+@pytest.mark.cli
+def test_check_bag_html_shows_the_activations(tmp_path):
+    from test_check_bag import Run, write_run
+
+    from forearm_dynamics.cli.check_bag import main as check_bag
+    from forearm_dynamics.offline.muscles import bag_muscles
+
+    run, muscles = tmp_path / "run.mcap", tmp_path / "muscles.mcap"
+    write_run(run, Run(movements=(40,)))
+    res, _counts, _cfg = bag_muscles(run, muscles)
+    out, plain = tmp_path / "report.html", tmp_path / "plain.html"
+    assert check_bag([str(muscles), "--html", str(out)]) == 0
+    assert check_bag([str(run), "--html", str(plain)]) == 0
+    text = out.read_text(encoding="utf-8")
+    assert "<h2>Muscles</h2>" in text and 'id="muscles"' in text
+    peak = res.activations.max(axis=0)
+    top = load_muscle_model().names[int(peak.argmax())]
+    assert f"<td>{top}</td><td class=\"num\">{peak.max():.3f}</td>" in text.replace("'", '"')
+    assert "<h2>Muscles</h2>" not in plain.read_text(encoding="utf-8")  # no muscles, no section
