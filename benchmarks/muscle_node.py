@@ -15,7 +15,7 @@ Sections (each states the load average; 2 cores):
   benchmark's variants): the torque node's latency p50 as a ratio to null_echo_node's, without
   and (chain) with muscle_node subscribed: "torque-path latency unchanged".
 - `opensim`: our per-sample QP against the cached OpenSim StaticOptimization reference
-  (analysis/muscle_reference.py; `make muscle-reference`) and against the exact-geometry
+  (muscle_validation/reference.py; `make muscle-reference`) and against the exact-geometry
   solve (MuJoCo tendon Jacobians + BVLS), per muscle.
 """
 
@@ -32,15 +32,15 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.procstat import Sampler
-from forearm_dynamics.analysis.muscle_reference import (
+from forearm_dynamics.dynamics import build_model
+from forearm_dynamics.movements import get_movement, movement_library
+from forearm_dynamics.muscle_validation.opensim_so import model_digest, our_movement
+from forearm_dynamics.muscle_validation.reference import (
     REFERENCE_FILE,
     accepted_frames,
     figures,
     load_reference,
 )
-from forearm_dynamics.analysis.muscle_so import model_digest, our_movement
-from forearm_dynamics.dynamics import build_model
-from forearm_dynamics.movements import get_movement, movement_library
 from forearm_dynamics.muscles import StaticOptimizer, load_muscle_model
 from forearm_dynamics.processes import Child, ros_env
 

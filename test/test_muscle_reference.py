@@ -23,7 +23,10 @@ import pytest
 from support.jointstate import joint_state_bytes
 
 from forearm_dynamics import JOINT_NAMES, build_model
-from forearm_dynamics.analysis.muscle_reference import (
+from forearm_dynamics.bag import BagWriter, TopicQos
+from forearm_dynamics.movements import get_movement
+from forearm_dynamics.muscle_validation.opensim_so import model_digest, our_movement
+from forearm_dynamics.muscle_validation.reference import (
     REFERENCE_FILE,
     TARGET_CORR,
     TARGET_FORCE_PCT,
@@ -32,9 +35,6 @@ from forearm_dynamics.analysis.muscle_reference import (
     figures,
     load_reference,
 )
-from forearm_dynamics.analysis.muscle_so import model_digest, our_movement
-from forearm_dynamics.bag import BagWriter, TopicQos
-from forearm_dynamics.movements import get_movement
 from forearm_dynamics.muscles import load_muscle_model
 
 EXACT_BOUND = 0.02
@@ -92,7 +92,11 @@ def test_surrogate_geometry_against_the_exact_geometry_solve(compared):
 def test_opensim_live_on_a_few_frames():
     osim = pytest.importorskip("opensim")  # the optional [reference] extra; only a guard
     assert osim.__version__.startswith("4.")
-    from forearm_dynamics.analysis.muscle_so import build_so_model, opensim_geometry, run_static_optimization
+    from forearm_dynamics.muscle_validation.opensim_so import (
+        build_so_model,
+        opensim_geometry,
+        run_static_optimization,
+    )
 
     mm = load_muscle_model()
     arm = build_model("segmented", 50)

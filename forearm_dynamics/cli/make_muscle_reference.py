@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis import muscle_so as so_mod
-from ..analysis.muscle_reference import REFERENCE_FILE, MuscleReference, bvls_solve, save_reference
 from ..dynamics import build_model
 from ..exit_codes import OK, USAGE
 from ..movements import get_movement
+from ..muscle_validation import opensim_so as so_mod
+from ..muscle_validation.reference import REFERENCE_FILE, MuscleReference, bvls_solve, save_reference
 from ..muscles import load_muscle_model
 from .common import die
 

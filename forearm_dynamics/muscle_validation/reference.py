@@ -3,7 +3,7 @@
 `make muscle-reference` (forearm_dynamics.cli.make_muscle_reference) writes
 forearm_dynamics/data/muscle_so_reference.npz:
 
-- OpenSim's StaticOptimization (muscle_so.py) of the MOVEMENT_IDS movements at RATE_HZ frames:
+- OpenSim's StaticOptimization (opensim_so.py) of the MOVEMENT_IDS movements at RATE_HZ frames:
   activations, forces, reserves per frame (float32: SO's own tolerance is ~1e-6);
 - the exact-geometry solve of the same frames: the source engine's own moment arms and
   lengths (MuJoCo MyoArm tendon Jacobians, muscles/fit.py's `MyoArm`, optional extra
@@ -28,7 +28,7 @@ import numpy as np
 
 from ..description import JOINT_NAMES
 from ..muscles import MuscleModel
-from .muscle_so import RESERVE_LIMIT_NM, RESERVE_OPTIMAL_TORQUE, TORQUE_LIMIT_NM
+from .opensim_so import RESERVE_LIMIT_NM, RESERVE_OPTIMAL_TORQUE, TORQUE_LIMIT_NM
 
 REFERENCE_FILE = Path(__file__).resolve().parents[1] / "data" / "muscle_so_reference.npz"
 PEAK_FOR_CORRELATION = 0.05
