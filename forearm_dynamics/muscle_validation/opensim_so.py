@@ -296,7 +296,10 @@ def run_static_optimization(model, mm: MuscleModel, t: np.ndarray, q: np.ndarray
         so.setStepInterval(step)
         so.setStartTime(float(solve_times[0]))
         so.setEndTime(float(solve_times[-1]))
-        model.addAnalysis(so)  # a tool given a model object runs the model's analyses
+        # a tool given a model object runs the model's analyses: this one only (a model used
+        # for several movements would otherwise run every earlier SO again, and crash)
+        model.updAnalysisSet().clearAndDestroy()
+        model.addAnalysis(so)
         # the tool was not made from a setup file: it reads the coordinates (and makes the
         # states from their splines) when asked to
         tool.loadStatesFromFile(model.initSystem())
