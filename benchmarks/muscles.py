@@ -22,7 +22,7 @@ import numpy as np
 
 from forearm_dynamics import build_model, movement_library
 from forearm_dynamics.muscles import StaticOptimizer, load_muscle_model
-from forearm_dynamics.muscles.curves import unit_forces
+from forearm_dynamics.muscles.curves import UnitForces
 
 OUT = Path(__file__).resolve().parent / "muscles.json"
 
@@ -37,6 +37,7 @@ def run(movements: list[int] | None, rate: float) -> dict:
     mm = load_muscle_model()
     arm = build_model("segmented")
     so = StaticOptimizer(mm)
+    forces = UnitForces(mm.params())
     lib = movement_library()
     chosen = [m for m in lib if movements is None or m.id in movements]
     clock = time.perf_counter_ns
@@ -53,7 +54,7 @@ def run(movements: list[int] | None, rate: float) -> dict:
             t1 = clock()
             R, L, V = mm.geometry(q[k], qd[k])
             t2 = clock()
-            unit_forces(mm.params(), L, V)
+            forces(L, V)
             t3 = clock()
             s = so.solve_geometry(R, L, V, tau)
             t4 = clock()

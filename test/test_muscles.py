@@ -280,6 +280,19 @@ def test_impossible_torque_goes_to_the_reserve_and_is_flagged(mm, arm):
     assert np.abs(s.reserves).sum() >= lp.fun - 1e-6
 
 
+def test_fast_unit_forces_equal_the_curves(mm):
+    from forearm_dynamics.muscles.curves import UnitForces
+
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-0.3, 1.2, size=(20, 20))
+    L = mm.lengths(q)
+    V = rng.normal(0, 0.05, size=L.shape)
+    fast = UnitForces(mm.params())
+    for k in range(len(q)):
+        np.testing.assert_allclose(fast(L[k], V[k])[0], unit_forces(mm.params(), L[k], V[k])[0],
+                                   rtol=1e-12, atol=1e-9)
+
+
 def test_daqp_agrees_with_scipy_bounded_least_squares(mm, arm):
     """min |a|² + |τ − A a|² over 0 <= a <= 1 (reserves eliminated), scipy BVLS at 1e-12."""
     mv = movement_library()[33]

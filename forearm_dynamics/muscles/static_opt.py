@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import daqp
 import numpy as np
 
-from .curves import unit_forces
+from .curves import UnitForces
 from .model import MuscleModel, MuscleModelError, _posture
 
 _INF = 1e30  # daqp's infinity
@@ -79,7 +79,7 @@ class StaticOptimizer:
         self.saturation_tol = float(saturation_tol)
         n = model.n
         self._n, self._nj = n, nj
-        self._params = model.params()
+        self._unit = UnitForces(model.params(), use_velocity=self.velocity, passive=self.passive)
         self._H = np.diag(np.concatenate([np.full(n, 2.0), 2.0 / r_opt ** 2]))
         self._f = np.zeros(n + nj)
         self._A = np.zeros((nj, n + nj))
@@ -94,8 +94,7 @@ class StaticOptimizer:
         self._qp = None
 
     def _problem(self, R: np.ndarray, L: np.ndarray, V: np.ndarray, tau: np.ndarray):
-        unit, pas = unit_forces(self._params, L, V, use_velocity=self.velocity,
-                                passive=self.passive)
+        unit, pas = self._unit(L, V)
         self._A[:, : self._n] = (R * unit[:, None]).T
         rhs = tau - R.T @ pas if self.passive else tau
         self._bu[-self._nj:] = rhs
