@@ -207,12 +207,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sections", default="solve,chain,torque_path,opensim")
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID") or 0) or 76)
     args = ap.parse_args(argv)
+    sections = set(args.sections.split(","))
     movements = [m.id for m in movement_library()]
     if args.quick:
         movements = movements[::13]
-    sections = set(args.sections.split(","))
-    out: dict = {"machine": machine_info(), "loadavg_start": loadavg(),
-                 "command": "python -m benchmarks.muscle_node " + " ".join(argv or sys.argv[1:])}
+    # sections run apart (e.g. opensim once the reference exists) merge into one file
+    out: dict = json.loads(args.out.read_text()) if args.out.is_file() else {}
+    out.update({"machine": machine_info(), f"loadavg_start_{'_'.join(sorted(sections))}": loadavg(),
+                f"command_{'_'.join(sorted(sections))}":
+                "python -m benchmarks.muscle_node " + " ".join(argv or sys.argv[1:])})
     if "solve" in sections:
         out["solve"] = solve_section(movements)
         print(json.dumps(out["solve"], indent=1), file=sys.stderr)
@@ -230,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             if "torque_path" in sections:
                 out["torque_path"] = torque_path_section(movements, out["domain_id"], Path(tmp), chain)
-    out["loadavg_end"] = loadavg()
+    out[f"loadavg_end_{'_'.join(sorted(sections))}"] = loadavg()
     write_json(args.out, out)
     print(f"wrote {args.out}")
     return 0

@@ -5,8 +5,10 @@
   library movements; our per-sample QP (as the node) on the same frames meets issue 31's
   targets: per-muscle RMS(Δactivation) <= 0.01, force RMS <= 2 % of F0, correlation >= 0.95
   where the peak activation >= 0.05; frames rejected (reserve use, torque mismatch) stay few;
-- the exact-geometry solve (MuJoCo tendon Jacobians + scipy BVLS, cached beside it): stated
-  bound RMS(Δa) <= 0.02 per muscle (the surrogate's geometry error, muscles/fit.py);
+- the exact-geometry solve (MuJoCo tendon Jacobians + scipy BVLS, cached beside it): the
+  same bound as against OpenSim, RMS(Δa) <= 0.01 per muscle (what differs is the surrogate's
+  geometry error alone; known to fail for BRA, 0.017: at full elbow extension its surrogate
+  moment arm is -0.51 mm where MyoArm's is +0.68 mm, so the QP cannot use it as a flexor);
 - OpenSim live on a few frames (slow): the model is built here and SO run now, so the cached
   file is not the only evidence;
 - bag_muscles: a bag of joint_torques in, muscle_forces and muscle_reserves out, read back by
@@ -37,7 +39,7 @@ from forearm_dynamics.muscle_validation.reference import (
 )
 from forearm_dynamics.muscles import load_muscle_model
 
-EXACT_BOUND = 0.02
+EXACT_BOUND = TARGET_RMS_DA  # 0.01, the issue's target against OpenSim
 
 
 @pytest.fixture(scope="module")
@@ -84,8 +86,8 @@ def test_surrogate_geometry_against_the_exact_geometry_solve(compared):
     ref, mm, A = compared[:3]
     assert ref.exact_activations is not None, "reference made with --no-exact"
     g = figures(mm, A, ref.exact_activations, np.ones(len(A), bool), {})
-    worst = g.worst(3)
-    assert g.rms_da.max() <= EXACT_BOUND, worst
+    bad = [g.row(i) for i in range(mm.n) if g.rms_da[i] > EXACT_BOUND]
+    assert not bad, bad
 
 
 @pytest.mark.slow
