@@ -85,9 +85,9 @@ class MuscleNode(Node):
         init_node(self, node_name)
         self.params = Params(self, SPECS, "muscle_node")
         s = self.settings = MuscleSettings.from_values(self.params.values())
-        for t in ("input_topic", "output_topic", "reserves_topic"):
+        topics = ["input_topic", "output_topic"] + (["reserves_topic"] if s.reserves_topic else [])
+        for t in topics:
             self.params.topic(t)
-        topics = ["input_topic", "output_topic", "reserves_topic"]
         topics += ["config_topic"] if s.config_topic else []
         self.params.distinct_topics(topics, {"/diagnostics": "diagnostics topic",
                                              "~/config": "node's config topic"})
@@ -126,7 +126,8 @@ class MuscleNode(Node):
 
         qos = stream_qos(s.qos_depth, s.qos_reliable)
         self.pub = self.create_publisher(JointState, s.output_topic, qos)
-        self.reserves_pub = self.create_publisher(JointState, s.reserves_topic, qos)
+        self.reserves_pub = (self.create_publisher(JointState, s.reserves_topic, qos)
+                             if s.reserves_topic else None)
         self.config_pub = self.create_publisher(String, "~/config", latched_qos())
         self._worker = ModelBuilder(self._build, self._announce)
         self._publish_config(self.bundle, 0)
@@ -143,7 +144,8 @@ class MuscleNode(Node):
         self.bundle.optimizer.reset()
         mm = self.bundle.model
         self.get_logger().info(
-            f"{self.sub.topic_name} -> {self.pub.topic_name} + {self.reserves_pub.topic_name}: "
+            f"{self.sub.topic_name} -> {self.pub.topic_name}"
+            + (f" + {self.reserves_pub.topic_name}" if self.reserves_pub is not None else "") + ": "
             f"{mm.n} muscles ({mm.source.get('name')}, {mm.source.get('licence')}), "
             f"{self.bundle.arm_summary['body_size']} {mm.side} arm, decimation {s.decimation}; "
             f"config on {self.config_pub.topic_name}"
@@ -212,7 +214,8 @@ class MuscleNode(Node):
         out.pack_stamp(sec, nsec)
         t_pub = _perf_ns()
         self.pub.publish(out.payload())
-        self.reserves_pub.publish(res.fill(sec, nsec, sol.reserves))
+        if self.reserves_pub is not None:
+            self.reserves_pub.publish(res.fill(sec, nsec, sol.reserves))
         t_end = _perf_ns()
         big = float(np.abs(sol.reserves).max())
         if big > self.settings.reserve_warn:
@@ -342,7 +345,8 @@ class MuscleNode(Node):
             "node": self.get_fully_qualified_name(), "version": self._version,
             "config_id": b.config_id, "applies_from_stamp_ns": applies_from,
             "input_topic": self.sub.topic_name if hasattr(self, "sub") else s.input_topic,
-            "output_topic": self.pub.topic_name, "reserves_topic": self.reserves_pub.topic_name,
+            "output_topic": self.pub.topic_name,
+            "reserves_topic": self.reserves_pub.topic_name if self.reserves_pub is not None else None,
             "layout": {"output": "sensor_msgs/JointState: name = muscles, position = activation "
                                  "(0..1), velocity = muscle-tendon lengthening speed (m/s), effort = "
                                  "tendon force (N)",

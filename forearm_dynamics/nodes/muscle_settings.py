@@ -25,7 +25,8 @@ MUSCLE_SPECS = (
          "muscle-tendon lengthening speed (m/s), effort = tendon force (N)"),
     Spec("reserves_topic", "muscle_reserves", "JointState output beside output_topic (same "
          "header): name = joints, effort = the reserve torque of each joint (N*m): what the "
-         "muscles could not carry; position and velocity empty"),
+         "muscles could not carry; position and velocity empty; '' = not published (one "
+         "message per sample instead of two: ~half the publish cost)"),
     Spec("config_topic", "torque_node/config", "the torque node's config topic (JSON, latched): "
          "its model, side and body size replace this node's own model parameters, following "
          "every live change; '' = never listen"),
