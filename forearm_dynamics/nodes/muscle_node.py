@@ -131,7 +131,8 @@ class MuscleNode(Node):
         self.config_pub = self.create_publisher(String, "~/config", latched_qos())
         self._worker = ModelBuilder(self._build, self._announce)
         self._publish_config(self.bundle, 0)
-        self.sub = self.create_subscription(JointState, s.input_topic, self._on_torques, qos, raw=True)
+        self.sub = self.create_subscription(JointState, s.input_topic, self._on_torques,
+                                            stream_qos(s.qos_depth, s.input_reliable), raw=True)
         if s.config_topic:
             self.create_subscription(String, s.config_topic, self._on_torque_config, latched_qos())
         self.add_on_set_parameters_callback(self._on_set)
@@ -361,6 +362,7 @@ class MuscleNode(Node):
                        "force_velocity": s.force_velocity, "passive": s.passive,
                        "tendon": "rigid"},
             "decimation": s.decimation, "build_ms": round(b.build_ms, 3),
+            "input_qos": "reliable" if s.input_reliable else "best effort",
         }
 
     def _publish_config(self, b: MuscleBundle, applies_from: int | None) -> None:

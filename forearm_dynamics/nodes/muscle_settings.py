@@ -45,7 +45,13 @@ MUSCLE_SPECS = (
     Spec("passive", False, "subtract the passive fibre forces' torques before the QP (false: "
          "like OpenSim's static optimisation, which leaves them out)"),
     Spec("qos_depth", 1000, "history depth of input and outputs", "messages", 1, 100000),
-    Spec("qos_reliable", True, "reliable (true) or best-effort (false) input and outputs"),
+    Spec("qos_reliable", True, "reliable (true) or best-effort (false) outputs"),
+    Spec("input_reliable", False, "reliable (true) or best-effort (false) joint_torques input. "
+         "Best effort by default so the torque path never waits for the muscles: a reliable "
+         "reader that falls behind fills the torque node's writer history and its publish() "
+         "then blocks (measured, benchmarks/muscle_node.py at load 11-17: joint_torques latency "
+         "p50 752 ms with a reliable muscle_node behind, 0.88 ms without). On loopback a best-"
+         "effort reader loses samples only when this node cannot keep up"),
     Spec("executor", "events", "rclpy executor: events (EventsExecutor) or single",
          choices=("events", "single")),
     Spec("diagnostics_period", 1.0, "time between /diagnostics messages; 0 = none", "s", 0.0, 3600.0),
@@ -70,6 +76,7 @@ class MuscleSettings(Settings):
     passive: bool
     qos_depth: int
     qos_reliable: bool
+    input_reliable: bool
     executor: str
     diagnostics_period: float
 
