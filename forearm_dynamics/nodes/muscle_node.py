@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 
 import numpy as np
@@ -93,6 +94,11 @@ class MuscleNode(Node):
                                              "~/config": "node's config topic"})
         self.params.warn_unknown()
         self.executor_kind = s.executor
+        if s.nice > 0:  # before any thread exists: DDS's and the worker's threads inherit it
+            try:
+                os.nice(s.nice)
+            except OSError as exc:
+                self.get_logger().warning(f"nice {s.nice} not applied ({exc})")
         self._version = package_version()
         arm = self._own_arm(self.params.values(MODEL_NAMES))
         try:
@@ -362,7 +368,7 @@ class MuscleNode(Node):
                        "force_velocity": s.force_velocity, "passive": s.passive,
                        "tendon": "rigid"},
             "decimation": s.decimation, "build_ms": round(b.build_ms, 3),
-            "input_qos": "reliable" if s.input_reliable else "best effort",
+            "input_qos": "reliable" if s.input_reliable else "best effort", "nice": os.nice(0),
         }
 
     def _publish_config(self, b: MuscleBundle, applies_from: int | None) -> None:

@@ -54,6 +54,8 @@ MUSCLE_SPECS = (
          "effort reader loses samples only when this node cannot keep up"),
     Spec("executor", "events", "rclpy executor: events (EventsExecutor) or single",
          choices=("events", "single")),
+    Spec("nice", 10, "niceness this process takes at start-up (Linux, 0 = unchanged): on a busy "
+         "machine the torque path keeps the CPU first and this node takes what is left", "", 0, 19),
     Spec("diagnostics_period", 1.0, "time between /diagnostics messages; 0 = none", "s", 0.0, 3600.0),
 )
 
@@ -78,6 +80,7 @@ class MuscleSettings(Settings):
     qos_reliable: bool
     input_reliable: bool
     executor: str
+    nice: int
     diagnostics_period: float
 
 
