@@ -39,6 +39,8 @@ from forearm_dynamics.muscle_validation.reference import (
 )
 from forearm_dynamics.muscles import load_muscle_model
 
+pytestmark = pytest.mark.slow  # every test here takes seconds (OpenSim, subprocesses, solves)
+
 EXACT_BOUND = TARGET_RMS_DA  # 0.01, the target against OpenSim
 
 
