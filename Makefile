@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup browser test test-unit test-hosts test-ros-tools demo demo-closed-loop lint bench bench-estimation bench-rate soak reference reproduce clean
+.PHONY: setup browser test test-unit test-hosts test-ros-tools demo demo-closed-loop lint bench bench-estimation bench-rate soak reference muscle-reference reproduce clean
 
 setup: $(VENV)/.installed browser
 
@@ -98,6 +98,13 @@ clean:
 
 reference: setup
 	$(VENV)/bin/make_reference
+
+# OpenSim's StaticOptimization of 13 library movements with the shipped muscles, and the
+# exact-geometry solve (MuJoCo, the muscles-fit extra): the cached muscle reference the tests
+# and benchmarks/muscle_node.py compare with (~10-25 min on 2 cores). docs/muscles.md
+muscle-reference: setup
+	$(PY) -m pip install -q --disable-pip-version-check -e ".[muscles-fit]"
+	$(PY) -m forearm_dynamics.cli.make_muscle_reference
 
 reproduce: setup
 	$(VENV)/bin/reproduce_paper --out results/paper --docs docs/paper.md --blocks docs/paper-discussion.md

@@ -25,6 +25,8 @@ EXECUTABLES = {
     "bag_export": "forearm_dynamics.cli.bag_export:main",
     "arm_viz": "forearm_dynamics.nodes.arm_viz:main",
     "bag_viz": "forearm_dynamics.cli.bag_viz:main",
+    "muscle_node": "forearm_dynamics.nodes.muscle_node:main",
+    "bag_muscles": "forearm_dynamics.cli.bag_muscles:main",
 }
 
 setup(

@@ -27,7 +27,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("uncertainty",),
     ("muscles",),
     ("analysis", "viz", "bag", "codec", "formats"),
-    ("offline",),
+    ("offline", "muscle_validation"),
     ("nodes", "cli"),
 )
 RANK = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}

@@ -325,8 +325,9 @@ def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> 
     print("\n".join(score.format_score(report, info)))
     if args.html is not None:
         from ..offline.html_report import render_segment, write_html
+        from ..offline.muscle_html import with_muscles
 
-        write_html(args.html, render_segment(report, rec, info, code))
+        write_html(args.html, with_muscles(render_segment(report, rec, info, code), open_bag(args.bag)))
     if args.json is not None:
         args.json.write_text(json.dumps({**score.score_dict(report), "exit_code": code}, indent=1),
                              encoding="utf-8")
@@ -401,8 +402,10 @@ def run(args: argparse.Namespace) -> int:
         args.json.write_text(json.dumps(doc, indent=1), encoding="utf-8")
     if args.html is not None:
         from ..offline.html_report import render, write_html
+        from ..offline.muscle_html import with_muscles
 
-        write_html(args.html, render(report, rec, ref, info, code, latency_lines(report, th)))
+        write_html(args.html, with_muscles(render(report, rec, ref, info, code,
+                                                  latency_lines(report, th)), bag))
     return code
 
 
