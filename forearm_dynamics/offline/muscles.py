@@ -11,8 +11,6 @@ bag's torque_node/config names (body size, side), else the caller's.
 
 from __future__ import annotations
 
-import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,17 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from ..bag.reader import open_bag
-from ..bag.recover import copy_layout, custom_data
-from ..bag.rosbag2_meta import TopicQos
-from ..bag.writer import BagWriter
 from ..codec.jointstate import JointSeries, read_joint_series
 from ..codec.jointstate_cdr import OutputTemplate, StdTemplate
-from ..codec.ros import message, serialize
 from ..description import JOINT_NAMES
 from ..errors import ForeignBag, OutputExists
 from ..model_config import model_from_config
 from ..muscles import MuscleModel, StaticOptimizer, load_muscle_model
 from ..version import package_version
+from .outputs import CONFIG, JOINT_STATE, copy_with_outputs
 from .recording import read_config
 
 
@@ -87,50 +82,24 @@ def write_bag(src: Path, dst: Path, res: MuscleResult, mm: MuscleModel, config: 
     for topic in (output_topic, reserves_topic, config_topic):
         if (ch := info.find_topic(topic)) is not None:
             raise OutputExists(f"{src} already has {ch.topic}; choose another with --topic")
-    writer = BagWriter(dst, overwrite=overwrite, custom_data=custom_data(info.metadata))
-    try:
-        ids = copy_layout(info, writer)
-        out = writer.add_topic("/" + output_topic.strip("/"), "sensor_msgs/msg/JointState",
-                               TopicQos(depth=1000))
-        rch = writer.add_topic("/" + reserves_topic.strip("/"), "sensor_msgs/msg/JointState",
-                               TopicQos(depth=1000))
-        cfg = writer.add_topic("/" + config_topic.strip("/"), "std_msgs/msg/String",
-                               TopicQos(depth=1, durability="transient_local"))
-        first_log = int(res.log_ns.min()) if len(res.log_ns) else info.start_ns
-        writer.write(cfg, serialize(message("String")(data=json.dumps(config))), first_log)
-        templates: dict[str, tuple[OutputTemplate, StdTemplate]] = {}
+    templates: dict[str, tuple[OutputTemplate, StdTemplate]] = {}
 
-        def emit(k: int) -> None:
-            fid = res.frame_ids[k]
-            if fid not in templates:
-                templates[fid] = (OutputTemplate(mm.names, fid), StdTemplate(JOINT_NAMES, fid))
-            tpl, rt = templates[fid]
-            tpl.q[:] = res.activations[k]
-            tpl.qd[:] = res.speeds[k]
-            tpl.effort[:] = res.forces[k]
-            sec_nsec = divmod(int(res.stamps_ns[k]), 1_000_000_000)
-            tpl.pack_stamp(*sec_nsec)
-            writer.write(out, tpl.payload(), int(res.log_ns[k]))
-            writer.write(rch, rt.fill(*sec_nsec, res.reserves[k]), int(res.log_ns[k]))
+    def emit(k: int, writer, channels: dict[str, int]) -> None:
+        fid = res.frame_ids[k]
+        if fid not in templates:
+            templates[fid] = (OutputTemplate(mm.names, fid), StdTemplate(JOINT_NAMES, fid))
+        tpl, rt = templates[fid]
+        tpl.q[:] = res.activations[k]
+        tpl.qd[:] = res.speeds[k]
+        tpl.effort[:] = res.forces[k]
+        sec_nsec = divmod(int(res.stamps_ns[k]), 1_000_000_000)
+        tpl.pack_stamp(*sec_nsec)
+        writer.write(channels[output_topic], tpl.payload(), int(res.log_ns[k]))
+        writer.write(channels[reserves_topic], rt.fill(*sec_nsec, res.reserves[k]),
+                     int(res.log_ns[k]))
 
-        k, n = 0, len(res.stamps_ns)
-        for ch, msg in bag.messages():
-            writer.write(ids[ch.id], msg.data, msg.log_time, msg.publish_time, msg.sequence)
-            while k < n and res.log_ns[k] <= msg.log_time:
-                emit(k)
-                k += 1
-        for rest in range(k, n):
-            emit(rest)
-        writer.close()
-    except BaseException:
-        writer.abort()
-        if not overwrite:
-            try:
-                os.unlink(dst)
-            except OSError:
-                pass
-        raise
-    return writer.counts()
+    kinds = [(output_topic, JOINT_STATE), (reserves_topic, JOINT_STATE), (config_topic, CONFIG)]
+    return copy_with_outputs(bag, dst, kinds, config, res.log_ns, emit, overwrite=overwrite)
 
 
 def bag_muscles(src: Path, dst: Path, *, muscle_model: str | None = None, body_size=50,

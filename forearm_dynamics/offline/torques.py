@@ -24,8 +24,6 @@ check_bag can rebuild the model and score the σ.
 
 from __future__ import annotations
 
-import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,12 +32,8 @@ import numpy as np
 
 from .. import model_config
 from ..bag.reader import open_bag
-from ..bag.recover import copy_layout, custom_data
-from ..bag.rosbag2_meta import TopicQos
-from ..bag.writer import BagWriter
 from ..codec.jointstate import JointSeries, read_joint_series
 from ..codec.jointstate_cdr import OutputTemplate, StdTemplate
-from ..codec.ros import message, serialize
 from ..dynamics import ArmModel
 from ..errors import ForeignBag, OutputExists, UsageError
 from ..estimation import DEFAULT_ESTIMATOR, make_estimator
@@ -50,6 +44,7 @@ from ..filtering import analysis_config, usable_cutoff
 from ..ranges import check_recording
 from ..uncertainty import NoCovariance, TorqueStd
 from ..version import package_version
+from .outputs import CONFIG, JOINT_STATE, copy_with_outputs
 
 #: Log time per chunk of the output (s): a cut file keeps all but the last CHUNK_SPAN_S
 #: before the cut.
@@ -239,60 +234,32 @@ def write_bag(src: Path, dst: Path, res: OfflineResult, arm: ArmModel, config: d
         if (ch := info.find_topic(topic)) is not None:
             raise OutputExists(f"{src} already has {ch.topic}; choose another with --topic "
                            f"(e.g. {output_topic}_offline)")
+    templates: dict[str, OutputTemplate] = {}
+    std_templates: dict[str, StdTemplate] = {}
+
+    def emit(k: int, writer, channels: dict[str, int]) -> None:
+        tpl = templates.get(res.frame_ids[k])
+        if tpl is None:
+            tpl = templates[res.frame_ids[k]] = OutputTemplate(arm.joint_names, res.frame_ids[k])
+        tpl.q[:] = res.q[k]
+        tpl.qd[:] = res.qd[k]
+        tpl.effort[:] = res.tau[k]
+        sec_nsec = divmod(int(res.stamps_ns[k]), 1_000_000_000)
+        tpl.pack_stamp(*sec_nsec)
+        writer.write(channels[output_topic], tpl.payload(), int(res.log_ns[k]))
+        if res.std is not None:
+            st = std_templates.get(res.frame_ids[k])
+            if st is None:
+                st = std_templates[res.frame_ids[k]] = StdTemplate(arm.joint_names, res.frame_ids[k])
+            writer.write(channels[std_topic], st.fill(*sec_nsec, res.std[k]), int(res.log_ns[k]))
+
+    kinds = [(output_topic, JOINT_STATE), (config_topic, CONFIG)]
+    if res.std is not None:
+        kinds.append((std_topic, JOINT_STATE))
     # chunks of 0.5 s of log time: written in a fraction of a second, the file would otherwise
     # hold ~1 MiB chunks (seconds of recording each) and a cut file lose them (bag/writer.py)
-    writer = BagWriter(dst, overwrite=overwrite, custom_data=custom_data(info.metadata),
-                       chunk_span_s=CHUNK_SPAN_S)
-    try:
-        ids = copy_layout(info, writer)
-        out = writer.add_topic("/" + output_topic.strip("/"), "sensor_msgs/msg/JointState",
-                               TopicQos(depth=1000))
-        cfg = writer.add_topic("/" + config_topic.strip("/"), "std_msgs/msg/String",
-                               TopicQos(depth=1, durability="transient_local"))
-        std_ch = None
-        if res.std is not None:
-            std_ch = writer.add_topic("/" + std_topic.strip("/"), "sensor_msgs/msg/JointState",
-                                      TopicQos(depth=1000))
-        first_log = int(res.log_ns.min()) if len(res.log_ns) else info.start_ns
-        writer.write(cfg, serialize(message("String")(data=json.dumps(config))), first_log)
-        templates: dict[str, OutputTemplate] = {}
-        std_templates: dict[str, StdTemplate] = {}
-
-        def emit(k: int) -> None:
-            tpl = templates.get(res.frame_ids[k])
-            if tpl is None:
-                tpl = templates[res.frame_ids[k]] = OutputTemplate(arm.joint_names, res.frame_ids[k])
-            tpl.q[:] = res.q[k]
-            tpl.qd[:] = res.qd[k]
-            tpl.effort[:] = res.tau[k]
-            sec_nsec = divmod(int(res.stamps_ns[k]), 1_000_000_000)
-            tpl.pack_stamp(*sec_nsec)
-            writer.write(out, tpl.payload(), int(res.log_ns[k]))
-            if std_ch is not None:
-                st = std_templates.get(res.frame_ids[k])
-                if st is None:
-                    st = std_templates[res.frame_ids[k]] = StdTemplate(arm.joint_names, res.frame_ids[k])
-                writer.write(std_ch, st.fill(*sec_nsec, res.std[k]), int(res.log_ns[k]))
-
-        k, n = 0, len(res.stamps_ns)
-        # interleave: each output right after its input (both carry the input's log time)
-        for ch, msg in bag.messages():
-            writer.write(ids[ch.id], msg.data, msg.log_time, msg.publish_time, msg.sequence)
-            while k < n and res.log_ns[k] <= msg.log_time:
-                emit(k)
-                k += 1
-        for rest in range(k, n):
-            emit(rest)
-        writer.close()
-    except BaseException:
-        writer.abort()
-        if not overwrite:
-            try:
-                os.unlink(dst)
-            except OSError:
-                pass
-        raise
-    return writer.counts()
+    return copy_with_outputs(bag, dst, kinds, config, res.log_ns, emit, overwrite=overwrite,
+                             chunk_span_s=CHUNK_SPAN_S)
 
 
 def bag_torques(src: Path, dst: Path, arm: ArmModel, *, estimator: str = DEFAULT_ESTIMATOR,
