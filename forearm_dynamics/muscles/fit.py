@@ -21,9 +21,7 @@ our BSD-3 package can carry (Apache-2.0; MoBL-ARMS is non-commercial). What the 
    scaled for it; MyoArm's forearm class keeps MuJoCo's default vmax 1.5 of its own curve).
 4. Samples postures uniformly over our joints' ranges (README table) and fits, per muscle,
    polynomials of the joints it crosses (total degree chosen per muscle, the smallest that
-   reaches 1 mm on held-out samples and keeps the sign of every moment arm the source has
-   one-signed, checked out to the range edges: `sign_violations`; at most MAX_DEGREE) to
-   the source's own length
+   reaches 1 mm on held-out samples, at most MAX_DEGREE) to the source's own length
    (`ten_length`) and moment arms (−`ten_J`, MuJoCo's analytic tendon Jacobian, not a
    finite difference of the length).
 5. Path-wrapping artefacts: 1° sweeps of each (muscle, joint) pair compare the length's step
@@ -224,37 +222,9 @@ def find_jumps(src: MyoArm, spans, lo, hi, rng, n_base: int = 6) -> list[dict]:
     return found
 
 
-def one_signed(Rf: np.ndarray, Rt: np.ndarray, span) -> np.ndarray:
-    """Per spanned joint: +1 / -1 where the source's moment arm has that sign on every fit
-    and held-out sample (a muscle that only flexes, as BRA about the elbow), else 0."""
-    r = np.concatenate([Rf[:, span], Rt[:, span]])
-    return np.where(r.min(axis=0) > 0, 1, np.where(r.max(axis=0) < 0, -1, 0))
-
-
-def sign_violations(coef: np.ndarray, exps: np.ndarray, xt: np.ndarray, sign: np.ndarray,
-                    span) -> int:
-    """Postures where a one-signed pair's fitted moment arm has the other sign: the held-out
-    samples, and each of them with one spanned joint moved to either edge of its range
-    (where a low degree bends over: BRA at full elbow extension, -0.51 mm where MyoArm has
-    +0.68 mm). Only the polynomial is evaluated there (the source's sign is known)."""
-    x = xt[:, span]
-    probes = [x]
-    for j in range(len(span)):
-        for edge in (-1.0, 1.0):
-            e = x.copy()
-            e[:, j] = edge
-            probes.append(e)
-    R = design(np.concatenate(probes), exps) @ coef[:, 1:]
-    return int(((R * sign[None, :]) <= 0)[:, sign != 0].sum())
-
-
 def fit_muscle(xf, Lf, Rf, xt, Lt, Rt, span) -> dict:
-    """Smallest degree reaching TARGET_M on held-out samples whose moment arms keep the
-    source's sign where it has one sign everywhere (`sign_violations`); if no degree does
-    both, the smallest reaching TARGET_M (its violations are recorded). Outliers excluded,
-    reported."""
-    sign = one_signed(Rf, Rt, span)
-    best = fallback = None
+    """Smallest degree reaching TARGET_M on held-out samples; outliers excluded, reported."""
+    best = None
     for degree in range(1, MAX_DEGREE + 1):
         exps = exponents(len(span), degree)
         if len(exps) > MAX_TERMS:
@@ -275,13 +245,10 @@ def fit_muscle(xf, Lf, Rf, xt, Lt, Rt, span) -> dict:
         err = At @ coef - Yt
         rms = np.sqrt(np.mean(err ** 2, axis=0))
         best = {"degree": degree, "exps": exps, "coef": coef, "rms": rms,
-                "max": np.abs(err).max(axis=0), "excluded": int((~keep).sum()),
-                "sign_violations": sign_violations(coef, exps, xt, sign, span)}
+                "max": np.abs(err).max(axis=0), "excluded": int((~keep).sum())}
         if rms.max() <= TARGET_M:
-            if best["sign_violations"] == 0:
-                return best
-            fallback = fallback or best
-    return fallback or best
+            break
+    return best
 
 
 def movement_box() -> tuple[np.ndarray, np.ndarray]:
@@ -370,7 +337,6 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                 "moment_arm_max_mm": {jn: round(float(fit["max"][1 + k]) * 1e3, 4)
                                       for k, jn in enumerate(joints)},
                 "excluded_samples": fit["excluded"],
-                "sign_violations": fit["sign_violations"],
                 "jumps": sum(1 for jp in jumps if jp["muscle"] == name),
             },
         })
