@@ -148,6 +148,39 @@ def test_batch_equals_single_sample(mm):
         np.testing.assert_allclose(mm.lengths(q[k]), L[k], atol=1e-15)
 
 
+@pytest.mark.parametrize("size", ["male_50", "female_5"])
+def test_opensim_polynomials_are_the_node_surrogate(size):
+    """One source of the polynomials: the OpenSim reference's path functions (re-expanded in
+    radians) are the node's pruned, scaled surrogate, not the file re-read (which differed
+    by up to 4.6e-6 m: the pruning); equal inside the fit box, and the box test flags the
+    postures where the node's clip acts."""
+    from forearm_dynamics.muscle_validation.opensim_so import in_fit_box, muscle_polynomials
+
+    mm = load_muscle_model(body_size=size)
+    s = mm.surrogate
+    polys = muscle_polynomials(mm)
+    rng = np.random.default_rng(11)
+    q = s.center + s.half * rng.uniform(-1, 1, size=(8, 20))
+    q[0] = s.center - s.half  # every joint on its lower edge (the failing frame's elbow)
+    assert in_fit_box(mm, q).all()
+    R, L = mm.moment_arms(q), mm.lengths(q)
+
+    def raw(poly, qs):
+        return sum(c * np.prod(qs ** np.array(e)) for e, c in poly.items())
+
+    for k, p in enumerate(polys):
+        cols = [J[j] for j in p.joints]
+        for i in range(len(q)):
+            qs = q[i, cols]
+            assert raw(p.length, qs) == pytest.approx(L[i, k], abs=1e-12), mm.names[k]
+            for j, c in enumerate(cols):
+                assert raw(p.moment_arms[j], qs) == pytest.approx(R[i, k, c], abs=1e-12), \
+                    (mm.names[k], p.joints[j])
+    out = q[:2].copy()
+    out[1, J["wrist_flexion"]] = s.center[J["wrist_flexion"]] + 1.01 * s.half[J["wrist_flexion"]]
+    assert in_fit_box(mm, out).tolist() == [True, False]
+
+
 def test_moment_arms_give_each_muscle_its_anatomical_action(mm):
     q = elbow_90()
     q[[J["thumb_cmc_abduction"], J["thumb_mcp_flexion"], J["thumb_ip_flexion"]]] = 0.5

@@ -50,7 +50,6 @@ import numpy as np
 from ..description import JOINT_NAMES
 from ..formats.opensim import write_table
 from ..muscles import MuscleModel
-from ..muscles.model import ARM_JOINTS
 from ..opensim_engine import _osim, build_osim_model
 from ..tree import KinematicTree
 
@@ -146,41 +145,31 @@ class MusclePolynomials:
 
 
 def muscle_polynomials(mm: MuscleModel) -> list[MusclePolynomials]:
-    """The shipped surrogate of every muscle, re-expanded in raw joint angles (rad).
+    """The node's surrogate of every muscle, re-expanded in raw joint angles (rad).
 
-    Read from the model's file (its public format: per muscle the exponents over the joints
-    it spans, length and moment-arm coefficients of x = (q - centre) / half_range), scaled
-    by the model's body-size rule (model.py: lengths x forearm or hand ratio, moment arms x
-    the ratio of the joint's segment), so it is what `mm.geometry` evaluates. Equal to the
-    surrogate inside its fit box; outside it the surrogate holds the angle at the box's edge
-    and these do not (the reference's movements stay inside: `in_fit_box`)."""
-    doc = json.loads(Path(mm.path).read_text(encoding="utf-8"))
-    center = np.asarray(doc["joints"]["center"], float)
-    half = np.asarray(doc["joints"]["half_range"], float)
-    fore, hand = mm.scaling.get("forearm_length", 1.0), mm.scaling.get("hand_length", 1.0)
-    rows = {m["name"]: m for m in doc["muscles"]}
+    Read from `mm.surrogate` itself (`Surrogate.polynomial`: its coefficients after pruning
+    and body-size scaling), never from the model file again: the file's coefficients are
+    pruned on loading (surrogate.PRUNE_M, up to 0.02 mm per polynomial), so a re-read of the
+    file gave OpenSim a geometry up to 4.6e-6 m away from the node's (PL about
+    wrist_flexion, movement 36 at 0.7 s). Equal to the surrogate inside its fit box; outside
+    it the surrogate holds the angle at the box's edge and OpenSim's polynomial cannot, so
+    frames outside the box are never compared (`in_fit_box`, used by accepted_frames)."""
+    s = mm.surrogate
     out = []
-    for name, span in zip(mm.names, mm.spans, strict=True):
-        sur = rows[name]["surrogate"]
+    for k, span in enumerate(mm.spans):
         cols = [JOINT_NAMES.index(j) for j in span]
-        exps = np.zeros((len(sur["exponents"]), len(JOINT_NAMES)), int)
-        exps[:, cols] = np.asarray(sur["exponents"], int)
-        order = max(int(exps.sum(axis=1).max()), 1)
-        l_scale = fore if set(span) & set(ARM_JOINTS) else hand
-        length = _expand(np.asarray(sur["length"], float) * l_scale, exps, center, half, cols)
-        arms = tuple(_expand(np.asarray(sur["moment_arms"][j], float)
-                             * (fore if j in ARM_JOINTS else hand), exps, center, half, cols)
-                     for j in span)
-        out.append(MusclePolynomials(tuple(span), order, length, arms))
+        rows = [k] + [s.moment_arm_row(k, c) for c in cols]
+        polys = [s.polynomial(r) for r in rows]
+        order = max([int(e.sum(axis=1).max()) for e, _ in polys if len(e)] + [1])
+        expanded = [_expand(c, e, s.center, s.half, cols) for e, c in polys]
+        out.append(MusclePolynomials(tuple(span), order, expanded[0], tuple(expanded[1:])))
     return out
 
 
 def in_fit_box(mm: MuscleModel, q: np.ndarray) -> np.ndarray:
-    """(N,) True where every spanned joint is inside the surrogate's fit box."""
-    s = mm.surrogate
-    x = (np.atleast_2d(q) - s.center) * s.inv_half
-    spanned = sorted({JOINT_NAMES.index(j) for span in mm.spans for j in span})
-    return (np.abs(x[:, spanned]) <= 1.0 + 1e-12).all(axis=1)
+    """(N,) True where every spanned joint is inside the surrogate's fit box: where the
+    surrogate's clip is inactive, so OpenSim's (unclipped) polynomials equal it."""
+    return mm.surrogate.in_box(q)
 
 
 # -- the OpenSim model ----------------------------------------------------------------------

@@ -172,14 +172,18 @@ def accepted_frames(mm: MuscleModel, q: np.ndarray, tau: np.ndarray, forces: np.
                     reserves: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
     """Frames to compare: OpenSim's reserves below RESERVE_LIMIT_NM and its torques (Σ R·F +
     r) within TORQUE_LIMIT_NM of ours (else its constraint was not met, or its splines'
-    derivatives differ from the movement's)."""
+    derivatives differ from the movement's), and every spanned joint inside the surrogate's
+    fit box (outside it the node clips the posture to the box's edge and OpenSim's
+    polynomials, which cannot clip, extrapolate: the two geometries differ there)."""
     R = mm.moment_arms(q)
     tau_so = np.einsum("kij,ki->kj", R, forces) + reserves
     reserve_use = np.abs(reserves).max(axis=1) > RESERVE_LIMIT_NM
     torque_off = np.abs(tau_so - tau).max(axis=1) > TORQUE_LIMIT_NM
-    keep = ~(reserve_use | torque_off)
+    outside = ~mm.surrogate.in_box(q)
+    keep = ~(reserve_use | torque_off | outside)
     return keep, {"reserve_use": int(reserve_use.sum()),
-                  "torque_mismatch": int((torque_off & ~reserve_use).sum())}
+                  "torque_mismatch": int((torque_off & ~reserve_use).sum()),
+                  "outside_fit_box": int((outside & ~(reserve_use | torque_off)).sum())}
 
 
 __all__ = ["JOINT_NAMES", "MuscleFigures", "MuscleReference", "accepted_frames", "bvls_solve",

@@ -53,8 +53,10 @@ class Surrogate:
         """keys: the monomials' exponent tuples (20 ints), sorted by degree, the constant
         first; coef's columns in that order."""
         self.center = center
+        self.half = half
         self.inv_half = 1.0 / half
-        self.coef = coef  # (n + n_pairs, K)
+        self.keys = np.asarray(keys, int).reshape(-1, len(JOINT_NAMES))  # (K, 20) exponents
+        self.coef = coef  # (n + n_pairs, K): pruned and scaled, the only coefficients used
         self.pair_rows, self.pair_cols = pair_rows, pair_cols
         self.pair_flat = pair_rows * len(JOINT_NAMES) + pair_cols
         self.n = n
@@ -144,6 +146,30 @@ class Surrogate:
     @property
     def n_monomials(self) -> int:
         return len(self._mono)
+
+    def polynomial(self, row: int) -> tuple[np.ndarray, np.ndarray]:
+        """Row `row` of the coefficient matrix (0..n-1: a muscle's length, then its moment
+        arms in pair order) as (exponents (K_r, 20), coefficients (K_r,)) of x, after
+        pruning and body-size scaling: exactly what `evaluate` sums. Anything that must
+        agree with the node (the OpenSim reference's FunctionBasedPath) reads it here, never
+        the file, so the two cannot differ."""
+        a, b = self.coef.indptr[row], self.coef.indptr[row + 1]
+        return self.keys[self.coef.indices[a:b]], self.coef.data[a:b].copy()
+
+    def moment_arm_row(self, muscle: int, joint: int) -> int:
+        """The coefficient row of (muscle, joint)'s moment arm (KeyError if not spanned)."""
+        hit = np.nonzero((self.pair_rows == muscle) & (self.pair_cols == joint))[0]
+        if len(hit) != 1:
+            raise KeyError((muscle, joint))
+        return self.n + int(hit[0])
+
+    def in_box(self, q: np.ndarray) -> np.ndarray:
+        """(N,) True where no spanned joint of q (N, 20) lies outside the fit box, i.e. where
+        the clip in `evaluate` changes nothing (the box test is the clip's own, |x| <= 1, up
+        to 1e-12: a movement ending exactly on a range edge rounds to 1 + 2e-16)."""
+        x = (np.atleast_2d(q) - self.center) * self.inv_half
+        spanned = np.unique(self.pair_cols)
+        return (np.abs(x[:, spanned]) <= 1.0 + 1e-12).all(axis=1)
 
     def _x(self, q: np.ndarray) -> np.ndarray:
         return np.clip((q - self.center) * self.inv_half, -1.0, 1.0)
