@@ -4,7 +4,7 @@ optimisation.
 Why a package of its own: the torque path (dynamics, estimation, nodes) must stay untouched
 and usable without it; the muscle layer takes the torques and the state and splits each
 torque into muscle forces. It knows nothing of ROS (the muscle node and the offline tools
-sit above it). MUSCLE-API.md (repository root) is the contract the node codes against.
+sit above it). docs/muscles-api.md is the contract the node codes against.
 
 - `model.py` — `MuscleModel` (parameters, spans, source and licence) and
   `load_muscle_model` (shipped MyoArm-derived default or a user's file; body size, side).
