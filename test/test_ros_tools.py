@@ -83,9 +83,20 @@ def ros2(env: dict, *args: str, timeout: float = 120) -> subprocess.CompletedPro
 
 
 def lifecycle(env: dict, verb: str, *args: str) -> subprocess.CompletedProcess:
-    """`ros2 lifecycle <verb>` without the ros2 daemon (it would outlive the test), asking
-    the graph for 3 s (discovery on loopback takes ~2.5 s)."""
-    return ros2(env, "lifecycle", verb, "--no-daemon", "--spin-time", "3", *args)
+    """`ros2 lifecycle <verb>` without the ros2 daemon (it would outlive the test).
+
+    Each call is a new process that must discover the graph again within its spin time
+    (~2.5 s on loopback when idle). Under load that window can close before the node is
+    seen: the CLI then prints "Node not found" on stderr and nothing was asked of the
+    node, so asking again is safe (CI once got an empty `get` that way at load 15). Up to
+    WAIT_S, with a longer window each time."""
+    deadline = time.monotonic() + WAIT_S
+    spin = 3.0
+    while True:
+        r = ros2(env, "lifecycle", verb, "--no-daemon", "--spin-time", f"{spin:g}", *args)
+        if "Node not found" not in r.stdout + r.stderr or time.monotonic() > deadline:
+            return r
+        spin = min(2 * spin, 20.0)
 
 
 class Launch:
