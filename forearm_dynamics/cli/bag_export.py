@@ -75,13 +75,19 @@ def _std_columns(bag, topic: str, stamps: np.ndarray) -> np.ndarray:
     """(N, J) σ (N·m, never negative: no sign change) of each torque row, matched by stamp;
     NaN where the σ topic has no message of that stamp, inf where it says warming up."""
     sd = read_joint_series(bag, topic, JOINT_NAMES, effort=True)
-    out = np.full((len(stamps), len(JOINT_NAMES)), np.nan)
-    order = np.argsort(sd.stamp_ns, kind="stable")
-    s_st = sd.stamp_ns[order]
+    return _at_stamps(sd.stamp_ns, sd.effort, stamps)
+
+
+def _at_stamps(series_stamps: np.ndarray, values: np.ndarray, stamps: np.ndarray) -> np.ndarray:
+    """Rows of `values` (one per series stamp) at `stamps`, matched exactly; NaN where the
+    series has no row of that stamp (a row is never borrowed from a neighbouring stamp)."""
+    out = np.full((len(stamps), values.shape[1]), np.nan)
+    order = np.argsort(series_stamps, kind="stable")
+    s_st = series_stamps[order]
     if len(s_st):
         pos = np.minimum(np.searchsorted(s_st, stamps), len(s_st) - 1)
         hit = s_st[pos] == stamps
-        out[hit] = sd.effort[order][pos[hit]]
+        out[hit] = values[order][pos[hit]]
     return out
 
 
@@ -95,15 +101,8 @@ def _muscle_table(bag, args: argparse.Namespace) -> tuple[list[str], np.ndarray,
     res_topic = s.topic.rsplit("/", 1)[0] + "/muscle_reserves"
     if bag.info.find_topic(res_topic) is not None:
         r = read_joint_series(bag, res_topic, JOINT_NAMES, effort=True)
-        table = np.full((len(stamps), len(JOINT_NAMES)), np.nan)
-        ro = np.argsort(r.stamp_ns, kind="stable")
-        rs = r.stamp_ns[ro]
-        if len(rs):
-            pos = np.minimum(np.searchsorted(rs, stamps), len(rs) - 1)
-            hit = rs[pos] == stamps
-            table[hit] = r.effort[ro][pos[hit]]
         labels += [f"{j}_reserve" for j in JOINT_NAMES]
-        cols.append(table)
+        cols.append(_at_stamps(r.stamp_ns, r.effort, stamps))
     return labels, stamps, np.hstack(cols), s.topic
 
 
