@@ -289,6 +289,17 @@ class ModelBundle:
         return (f"model {arm.kind}, body size {arm.body_size.label}, {arm.side} arm, {payload}, "
                 f"estimator {self.request.estimator}")
 
+    def torques(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """RNEA of the model; with a shoulder, its public coordinates to the chain and back
+        (ShoulderArmModel.inverse_dynamics); non-finite comes back as NaN (the caller
+        refuses it)."""
+        if self.arm.nv == 20:
+            return pin.rnea(self.model, self.data, q, qd, qdd)
+        try:
+            return self.arm.inverse_dynamics(q, qd, qdd)
+        except ValueError:
+            return np.full(self.arm.nv, np.nan)
+
 
 def build_bundle(request: ModelRequest, config_id: int, n: int,
                  previous: ModelBundle | None = None, std: str | None = None) -> ModelBundle:

@@ -49,7 +49,6 @@ import math
 import time
 
 import numpy as np
-import pinocchio as pin
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
@@ -57,13 +56,12 @@ from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import String
 
 from ..description import JOINT_NAMES
-from ..estimation.stamps import MIN_SUPPORTED_RATE_HZ, rate_note
-from ..model_config import config_message
 from ..ranges import SampleGuard
 from ..shoulder import ENU_TO_WORLD, angles_from_rotation, convention, quaternion_matrix
 from ..version import package_version
 from . import validation as v
 from .common import latched_qos, main_for, stream_qos
+from .fixed_rate_output import FixedRateOutput
 from .live_model import LiveModel
 from .model_builder import ModelBuilder
 from .params import ParameterError, Params
@@ -79,28 +77,14 @@ from .torque_config import (
     OutputSettings,
     build_bundle,
 )
+from .torque_status import TorqueStatus
 
 _time_ns = time.time_ns
-_monotonic_ns = time.monotonic_ns
-#: output_rate_hz: how late (s) the output may fall behind its deadlines and still catch
-#: up, at most one output per tick (twice the rate); a longer stall drops the periods
-_MAX_BACKLOG_S = 0.05
 
 
-def _torques(b: ModelBundle, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
-    """RNEA of the bundle's model; with a shoulder, its public coordinates to the chain and
-    back (ShoulderArmModel.inverse_dynamics); non-finite comes back as NaN (the caller
-    refuses it)."""
-    if b.arm.nv == 20:
-        return pin.rnea(b.model, b.data, q, qd, qdd)
-    try:
-        return b.arm.inverse_dynamics(q, qd, qdd)
-    except ValueError:
-        return np.full(b.arm.nv, np.nan)
-
-
-class TorqueNode(JointStreamNode):
-    """Inverse dynamics per sample: pin.rnea on preallocated q, qd, qdd."""
+class TorqueNode(TorqueStatus, FixedRateOutput, JointStreamNode):
+    """Inverse dynamics per sample: pin.rnea on preallocated q, qd, qdd. What it states
+    about itself: torque_status.py; output at a fixed rate: fixed_rate_output.py."""
 
     specs = (*STREAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS, *MODEL_SPECS)
     config_name = "torque_node"
@@ -125,13 +109,7 @@ class TorqueNode(JointStreamNode):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         if self.output_rate_hz > 0:
-            # An rcl timer skips the periods it was late for (under load: ~5 % of them at
-            # 1 kHz). It ticks at twice the rate; _on_tick publishes when the next absolute
-            # deadline is due, so a late output is caught up one per tick (never a burst).
-            self._period_ns = round(1e9 / self.output_rate_hz)
-            self._due_ns = 0
-            self._max_backlog_ns = max(round(_MAX_BACKLOG_S * 1e9), 2 * self._period_ns)
-            self.create_timer(0.5 / self.output_rate_hz, self._on_tick)
+            self.start_fixed_rate_output()  # fixed_rate_output.py
         b = self.live.in_use
         self.get_logger().info(
             f"{b.summary()}; config on {self.config_pub.topic_name}"
@@ -286,7 +264,7 @@ class TorqueNode(JointStreamNode):
         # computed from it and the output message states it ("position and velocity as used")
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
-        tau = _torques(b, self.q, self.qd, est.qdd)
+        tau = b.torques(self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh
             if ts is not None:
@@ -316,72 +294,6 @@ class TorqueNode(JointStreamNode):
             b = self.live.first_output()
             if b is not None:  # the worker thread publishes it: no JSON work here
                 self._worker.announce(b, sec * 1_000_000_000 + nanosec)
-
-    # -- fixed-rate output ---------------------------------------------------------------
-    def _on_tick(self) -> None:
-        """Publish if the deadline is due: deadlines are k periods apart, whatever the ticks."""
-        now = _monotonic_ns()
-        due = self._due_ns
-        if now < due:
-            return
-        late = now - due
-        if late > self._max_backlog_ns:  # too far behind: drop, start again from now
-            if due:
-                self.timer_skipped["late"] += late // self._period_ns
-                self.deadlines.dropped(late // self._period_ns, late)
-            due = now
-        self._due_ns = due + self._period_ns
-        if not self._on_timer():
-            self._due_ns = now + self._period_ns  # silent: resume on time, no catching up
-        else:
-            self.deadlines.check_timer(now - due, _monotonic_ns() - now)
-
-    def _on_timer(self) -> bool:
-        """One output stamped now (system clock), from the estimate predicted to now."""
-        now = _time_ns()
-        if not self._have_state:
-            self._skip("no_input", "no input yet")
-            return False
-        if now - self._last_in_ns > self.input_timeout_ns:
-            self._skip("input_timeout", f"no input for {(now - self._last_in_ns) / 1e9:.3f} s "
-                       f"(> input_timeout): not publishing")
-            return False
-        if now - self._state_t_ns > self.input_timeout_ns:
-            self._skip("stamps_behind", f"input stamps {(now - self._state_t_ns) / 1e9:.3f} s behind "
-                       "this node's clock (> input_timeout): not publishing")
-            return False
-        t_start = time.perf_counter_ns()
-        b = self.live.in_use
-        est = b.estimator
-        # with a delay, the output is the (smoothed) estimate delay_s back, stamped so
-        stamp = max(now - round(getattr(est, "delay_s", 0.0) * 1e9), self._last_out_ns + 1)
-        est.predict(stamp)  # from the last update's estimate, whatever was predicted before
-        np.copyto(self.q, est.q)
-        np.copyto(self.qd, est.qd)
-        tau = _torques(b, self.q, self.qd, est.qdd)
-        if not math.isfinite(tau.sum()):
-            self.stats.rejected[v.NON_FINITE_TORQUE] += 1
-            return False
-        np.copyto(self.effort, tau)
-        sec, nsec = divmod(stamp, 1_000_000_000)
-        self.out.pack_stamp(sec, nsec)
-        self.pub.publish(self.out.payload())
-        self._last_out_ns = stamp
-        self.stats.published += 1
-        if self._silent is not None:
-            self.get_logger().info("input back: publishing again")
-            self._silent = None
-        self.after_output(sec, nsec)
-        t_end = time.perf_counter_ns()
-        self.stats.record(t_end - t_start, now - self._state_t_ns, 0)
-        return True
-
-    def _skip(self, key: str, why: str) -> None:
-        self.timer_skipped[key] += 1
-        if self._silent != key:
-            if key != "no_input":
-                self.get_logger().warning(why)
-            self._silent = key
 
     # -- live changes --------------------------------------------------------------------
     def _on_set(self, params: list[Parameter]) -> SetParametersResult:
@@ -420,109 +332,6 @@ class TorqueNode(JointStreamNode):
         self.live.built(b)
         self.get_logger().info(f"config {b.config_id} built in {b.build_ms:.1f} ms "
                                f"({b.summary()}); applies from the next sample")
-
-    # -- config message and diagnostics --------------------------------------------------
-    def config_message(self, b: ModelBundle, applies_from: int | None) -> dict:
-        dt = self.sample_interval_s()
-        s = self.settings
-        return config_message(
-            b.model_config,
-            config_id=b.config_id,
-            applies_from_stamp_ns=applies_from,
-            node=self.get_fully_qualified_name(),
-            version=self._version,
-            estimator=b.estimator.describe(dt, self._velocity_given),
-            input_topic=self.sub.topic_name if hasattr(self, "sub") else s.input_topic,
-            output_topic=self.pub.topic_name if hasattr(self, "pub") else s.output_topic,
-            max_stamp_gap=s.max_stamp_gap,
-            output_rate_hz=self.output_rate_hz,
-            input_timeout=self.input_timeout_ns / 1e9,
-            build_ms=round(b.build_ms, 3),
-            deadline_ms=self.deadlines.deadline_ms if hasattr(self, "deadlines") else None,
-            realtime=(self.realtime_state.describe() if self.realtime_state is not None
-                      else {"policy": "not applied yet"}),
-            std=self._std_config(b),
-            input=self._input_config(),
-        )
-
-    def _input_config(self) -> dict:
-        out = {"missing_joints": self.missing_joints,
-               "held_joints": list(getattr(self, "held_joints", ()))}
-        if self._hold_posture is not None:
-            out["hold_posture"] = dict(zip(self.live.in_use.arm.joint_names if hasattr(self, "live")
-                                           else (), self._hold_posture.tolist(), strict=False))
-        return out
-
-    def _std_config(self, b: ModelBundle) -> dict:
-        if self._std_topic is None:
-            return {"published": False, "why": "publish_std is false"}
-        out = dict(b.std_config)
-        if out.get("published") and hasattr(self, "std_pub"):
-            out["topic"] = self.std_pub.topic_name  # as resolved (remapping included)
-        return out
-
-    def _publish_config(self, b: ModelBundle, applies_from: int | None) -> None:
-        """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None)."""
-        self.config_pub.publish(String(data=self.live.config_text(b, applies_from)))
-
-    def on_first_step(self, d_ns: int) -> None:
-        """The input's rate is known: one line if it is below the supported rates."""
-        note = rate_note(d_ns * 1e-9)
-        if note is not None:
-            self.get_logger().warning(note)
-
-    def diagnostic_values(self, status) -> dict[str, str]:
-        b = self.live.in_use
-        dt = self.stamp_rule.interval_ns * 1e-9
-        rate = {"stamp_rate_hz": f"{1.0 / dt:.3g}" if dt > 0 else "unknown",
-                "rate_supported": "unknown" if dt <= 0 else
-                ("yes" if rate_note(dt) is None else f"no: below {MIN_SUPPORTED_RATE_HZ:g} Hz")}
-        if dt > 0 and rate_note(dt) is not None and status.level == status.OK \
-                and status.message != "no input":  # a stream's last step may be its pause
-            status.level = status.WARN
-            status.message = (f"input at {1.0 / dt:.3g} Hz: below the rates the estimator is "
-                              f"measured at ({MIN_SUPPORTED_RATE_HZ:g} Hz to 1 kHz)")
-        desc = b.estimator.describe(self.sample_interval_s(), self._velocity_given)
-        extra = {
-            "config_id": str(b.config_id),
-            "model": f"{b.arm.kind}, body size {b.arm.body_size.label}",
-            "estimator": desc["method"],
-            **{f"estimator.lag_{k}_s": f"{x:.6f}" for k, x in desc["lag_s"].items()},
-            "estimator.noise_rad": "unknown" if desc["noise_rad"] is None else f"{desc['noise_rad']:.3g}",
-            "missing_joints": self.missing_joints,
-            "held_joints": ", ".join(self.held_joints) or "none",
-            **{f"live_changes.{k}": str(n) for k, n in self.live.counts().items()},
-            **rate,
-        }
-        guard = self._guard
-        if guard.far_count > self._far_seen:
-            status.level = status.ERROR
-            status.message = (f"{guard.far_count - self._far_seen} sample(s) with angles far outside "
-                              "the joints' ranges: check units (degrees as radians?)")
-            self._far_seen = guard.far_count
-        elif guard.tiny_warning:
-            status.level = max(status.level, status.WARN)
-            status.message = "angles all within +-3 deg while moving: check units (radians twice?)"
-        extra["angles_far_out_of_range"] = str(guard.far_count)
-        extra["angles_warned"] = ", ".join(sorted(guard.warned)) or "none"
-        if self.output_rate_hz > 0:
-            extra.update({f"timer_skipped.{k}": str(n) for k, n in self.timer_skipped.items()})
-            if self._silent in ("input_timeout", "stamps_behind"):
-                status.level = status.WARN
-                status.message = f"not publishing: {self._silent.replace('_', ' ')}"
-        return extra
-
-    def after_diagnostics(self) -> None:
-        if self.held_joints != self._held_stated:  # the input's joint set changed: restate
-            self._held_stated = self.held_joints
-            self.live.restate()
-            self._publish_config(self.live.in_use, 0)
-        self._after_diagnostics_base()
-
-    def _after_diagnostics_base(self) -> None:
-        text = self.live.in_force_text  # the config in force, republished with the diagnostics
-        if text:
-            self.config_pub.publish(String(data=text))
 
     def destroy_node(self) -> None:
         worker = getattr(self, "_worker", None)
