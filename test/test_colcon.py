@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from support.colcon import colcon_build_clean_copy
 
 pytestmark = [pytest.mark.cli, pytest.mark.slow]
 
@@ -24,17 +25,7 @@ def _executables() -> list[str]:
 def install(tmp_path_factory):
     if shutil.which("colcon", path=str(VENV_BIN)) is None:
         pytest.fail("colcon is not installed in the venv (make setup installs it)")
-    ws = tmp_path_factory.mktemp("ws")
-    files = subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True,
-                           check=True).stdout.split()
-    for f in files:
-        (ws / "src" / "forearm_dynamics" / f).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(REPO / f, ws / "src" / "forearm_dynamics" / f)
-    env = {**os.environ, "PATH": f"{VENV_BIN}:{os.environ.get('PATH', '')}"}
-    r = subprocess.run([str(VENV_BIN / "colcon"), "build", "--base-paths", "src"], cwd=ws, env=env,
-                       capture_output=True, text=True, timeout=300, check=False)
-    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
-    return ws / "install" / "forearm_dynamics"
+    return colcon_build_clean_copy(tmp_path_factory.mktemp("ws"), VENV_BIN, 300) / "forearm_dynamics"
 
 
 def test_every_executable_under_lib(install):

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pytest
 import rosproc
+from support.colcon import colcon_build_clean_copy
 
 from forearm_dynamics.processes import popen
 
@@ -51,19 +52,11 @@ def ros_env_base(tmp_path_factory) -> dict[str, str]:
     """colcon build of a clean copy of the checkout; the environment its setup.bash makes."""
     if shutil.which("ros2", path=str(VENV_BIN)) is None:
         pytest.fail("no ros2 CLI in this venv: run `make test-ros-tools ROS2CLI_INSTALL=...`")
-    ws = tmp_path_factory.mktemp("ws")
-    files = subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True,
-                           check=True).stdout.split()
-    for f in files:
-        (ws / "src" / "forearm_dynamics" / f).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(REPO / f, ws / "src" / "forearm_dynamics" / f)
-    env = {**os.environ, "PATH": f"{VENV_BIN}:{os.environ.get('PATH', '')}"}
     t0 = time.monotonic()
-    r = subprocess.run([str(VENV_BIN / "colcon"), "build", "--base-paths", "src"], cwd=ws, env=env,
-                       capture_output=True, text=True, timeout=600, check=False)
-    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    install = colcon_build_clean_copy(tmp_path_factory.mktemp("ws"), VENV_BIN, 600)
     print(f"colcon build: {time.monotonic() - t0:.1f} s")
-    dump = subprocess.run(["bash", "-c", f"source {ws}/install/setup.bash && env -0"], env=env,
+    env = {**os.environ, "PATH": f"{VENV_BIN}:{os.environ.get('PATH', '')}"}
+    dump = subprocess.run(["bash", "-c", f"source {install}/setup.bash && env -0"], env=env,
                           capture_output=True, check=True, timeout=60).stdout
     sourced = dict(kv.split("=", 1) for kv in dump.decode().split("\0") if "=" in kv)
     sourced["AMENT_PREFIX_PATH"] += f":{VENV_BIN.parent}"
