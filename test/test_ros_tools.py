@@ -281,15 +281,21 @@ def test_record_launch_writes_a_complete_bag(ros_env_base, tmp_path) -> None:
     assert len(re.findall(r"wrote \d+ messages to", launch.text())) == 1
 
 
-def test_demo_launch_replays_and_checks(ros_env_base, tmp_path) -> None:
+def _launch_to_end(ros_env_base, tmp_path, file: str, *args: str) -> tuple[dict, Launch, str]:
+    """A launch file that ends by itself: run it to its end (exit 0 required)."""
     env = env_for(ros_env_base, rosproc.test_domain(140, 160))
-    launch = Launch(env, tmp_path, "demo", "movements:=1,26", f"out:={tmp_path}")
+    launch = Launch(env, tmp_path, file, *args, f"out:={tmp_path}")
     try:
         code = launch.wait(timeout=WAIT_S + 120)
     finally:
         launch.kill()
     text = launch.text()
     assert code == 0, text[-4000:]
+    return env, launch, text
+
+
+def test_demo_launch_replays_and_checks(ros_env_base, tmp_path) -> None:
+    env, launch, text = _launch_to_end(ros_env_base, tmp_path, "demo", "movements:=1,26")
     assert re.search(r"\[check_bag-\d+\]: process has finished cleanly", text), text[-4000:]
     bag = next(tmp_path.glob("launch_*/run.mcap"))
     r = subprocess.run([str(VENV_BIN / "check_bag"), str(bag)], env=env, capture_output=True,
@@ -335,14 +341,7 @@ def test_viz_launch_publishes_the_arm(ros_env_base, tmp_path) -> None:
 
 
 def test_closed_loop_launch_tracks(ros_env_base, tmp_path) -> None:
-    env = env_for(ros_env_base, rosproc.test_domain(140, 160))
-    launch = Launch(env, tmp_path, "closed_loop", "movements:=1", f"out:={tmp_path}")
-    try:
-        code = launch.wait(timeout=WAIT_S + 120)
-    finally:
-        launch.kill()
-    text = launch.text()
-    assert code == 0, text[-4000:]
+    _, launch, text = _launch_to_end(ros_env_base, tmp_path, "closed_loop", "movements:=1")
     assert "movement  1" in text and "tracking RMS" in text, text[-4000:]
     assert (tmp_path / "results.json").is_file()
     assert_no_orphans(launch, launch.children())
