@@ -21,7 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rosbags.highlevel import AnyReader
 from rosproc import BIN, ros_env
 from sensor_msgs.msg import JointState
-from support.jointstate import joint_state_bytes
+from support.jointstate import joint_state_bytes, publish_positions
 
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.bag import BagWriter
@@ -103,14 +103,7 @@ class Nodes:
                     "_message": st.message, "_level": st.level}
 
     def send(self, stamps: np.ndarray, q: np.ndarray) -> None:
-        msg = JointState()
-        msg.header.frame_id = "humerus"
-        msg.name = list(JOINT_NAMES)
-        for k in range(len(stamps)):
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamps[k]), 1_000_000_000)
-            msg.position = q[k].tolist()
-            self.pub.publish(msg)
-            self.peer.spin_for(0.0005)
+        publish_positions(self.pub, self.peer, stamps, q)
 
     def close(self) -> list[str]:
         self.peer.close()

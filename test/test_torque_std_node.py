@@ -16,6 +16,7 @@ import pytest
 import rosproc
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from support.jointstate import publish_positions
 
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.movements import movement_library
@@ -73,14 +74,7 @@ class Run:
         assert ok, self.proc.output()
 
     def send(self, stamps, q) -> None:
-        msg = JointState()
-        msg.header.frame_id = "humerus"
-        msg.name = list(JOINT_NAMES)
-        for k in range(len(stamps)):
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamps[k]), 1_000_000_000)
-            msg.position = q[k].tolist()
-            self.pub.publish(msg)
-            self.peer.spin_for(0.0005)
+        publish_positions(self.pub, self.peer, stamps, q)
 
     def close(self) -> None:
         self.peer.close()

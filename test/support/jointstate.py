@@ -48,3 +48,16 @@ def cdr_stamp(raw: bytes) -> int:
     """header.stamp of a serialized stamped message (4-byte CDR encapsulation, then sec, nanosec)."""
     sec, nsec = struct.unpack_from("<iI", raw, 4)
     return sec * 1_000_000_000 + nsec
+
+
+def publish_positions(pub, peer, stamps: Sequence[int], q, frame_id: str = "humerus") -> None:
+    """Publish one positions-only JointState per stamp (rows of q, the 20 joints), spinning
+    the peer 0.5 ms after each (its subscriptions keep up; ~1 kHz at most)."""
+    msg = JointState()
+    msg.header.frame_id = frame_id
+    msg.name = list(JOINT_NAMES)
+    for k in range(len(stamps)):
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamps[k]), 1_000_000_000)
+        msg.position = q[k].tolist()
+        pub.publish(msg)
+        peer.spin_for(0.0005)
