@@ -69,6 +69,8 @@ def test_priority_50_on_executor_and_middleware_threads_not_the_builder(procs):
         builders = [t for t in threads.values() if t.name == "model_builder"]
         assert len(builders) == 1, threads
         assert (builders[0].policy, builders[0].priority) == ("normal", 0), builders
+        watchers = [t for t in threads.values() if t.name == "stop_watch"]  # nodes/common.spin
+        assert [(t.policy, t.priority) for t in watchers] == [("normal", 0)], threads
         cfg = _config(h)["realtime"]
         assert (cfg["policy"], cfg["priority"]) == ("fifo", 50), cfg
         d = h.diag.fresh(lambda d: "realtime.policy" in d)

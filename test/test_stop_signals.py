@@ -115,3 +115,78 @@ def test_sigint_twice_to_the_group_exits_0(name, tmp_path) -> None:
         assert counts.get("/joint_states", 0) > 0, counts
         summary = [ln for ln in text.splitlines() if "wrote " in ln and " messages to " in ln]
         assert len(summary) == 1, text[-3000:]
+
+
+#: a node (common.main_for, as every node of ours) whose callback takes 50 ms, and a peer
+#: that sends it 2000 samples at once: a backlog of 100 s of work
+SLOW = r"""
+import time
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from forearm_dynamics.nodes.common import main_for
+class Slow(Node):
+    def __init__(self):
+        super().__init__("slow_node")
+        self.n = 0
+        self.create_subscription(JointState, "joint_states", self.cb,
+                                 QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE))
+        print("ready", flush=True)
+    def cb(self, msg):
+        self.n += 1
+        if self.n == 1:
+            print("first", flush=True)
+        time.sleep(0.05)
+    def finish(self):
+        print(f"handled {self.n}", flush=True)
+        return 0
+main_for(Slow, "slow_node")
+"""
+
+FLOOD = r"""
+import sys, time
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+rclpy.init()
+n = rclpy.create_node("flood_peer")
+pub = n.create_publisher(JointState, "joint_states",
+                         QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE))
+while pub.get_subscription_count() == 0:
+    rclpy.spin_once(n, timeout_sec=0.1)
+time.sleep(1.0)
+for k in range(int(sys.argv[1])):
+    pub.publish(JointState(name=["a"], position=[float(k)]))
+print("sent", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_sigint_stops_a_node_behind_by_a_backlog(tmp_path) -> None:
+    """A stop does not wait for the queue to drain: the EventsExecutor of these wheels runs
+    its queue until empty whatever the spin's timeout, and a torque_node 10 000 samples
+    behind at load 9 was still running 60 s after SIGINT (CI). Here 2000 samples of 50 ms
+    each wait; after SIGINT the node exits 0 having handled only some of them."""
+    domain = rosproc.test_domain(102, 139)
+    env = rosproc.ros_env(domain)
+    log, flog = tmp_path / "slow.log", tmp_path / "flood.log"
+    node = _start([sys.executable, "-c", SLOW], env, log)
+    flood = _start([sys.executable, "-c", FLOOD, "2000"], env, flog)
+    try:
+        deadline = time.monotonic() + WAIT_S
+        while time.monotonic() < deadline and node.poll() is None and not (
+                "first" in log.read_text() and "sent" in flog.read_text()):
+            time.sleep(0.1)
+        assert "sent" in flog.read_text() and "first" in log.read_text(), log.read_text()
+        time.sleep(1.0)
+        os.kill(node.pid, signal.SIGINT)
+        code = node.wait(timeout=WAIT_S)  # a hang guard; the drain alone would take ~100 s
+    finally:
+        for p in (node, flood):
+            if p.poll() is None:
+                p.kill()
+                p.wait(timeout=10)
+    text = log.read_text()
+    assert code == 0, text[-3000:]
+    handled = int(text.split("handled ")[1].split()[0])
+    assert 0 < handled < 1000, text[-3000:]  # the stop came after ~2 s: far from all 2000

@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import signal
 import sys
+import threading
 from collections.abc import Callable
 
 import rclpy
@@ -17,6 +18,7 @@ from rclpy.task import Future
 from threadpoolctl import threadpool_limits
 
 from ..exit_codes import OK, USAGE
+from ..realtime import make_normal, set_thread_name
 from .params import ParameterError
 
 #: Latched topic on which the torque node states its model (kind, body size, joint names).
@@ -66,13 +68,28 @@ def spin(node: Node, executor=None, timeout_sec: float = 0.5, done: Future | Non
 
     EventsExecutor.spin() in these wheels burns a core and ignores SIGINT, so wait on a
     future with a timeout while rclpy.ok(); the context's shutdown wakes the executor.
+
+    The timeout alone does not end a turn: the EventsExecutor of these wheels runs its
+    queue until it is empty (EventsQueue::RunUntil checks its deadline only while the
+    queue is empty), so a node behind by a backlog stopped only once it had drained it
+    (CI: torque_node with qos_depth 10000 at load 9 still running 60 s after SIGINT). So
+    the spin waits on `wake`, completed by the node's `done` or by a stop signal; the
+    signal's side is a watcher thread (_wake_on_stop), because a signal handler must not
+    take the Future's lock, which the main thread may hold when the signal comes. The
+    queue then stops after the callback in progress.
     """
     executor = executor or make_executor()
-    done = done or Future()
+    wake = Future()
+    if done is not None:
+        done.add_done_callback(lambda _f: wake.set_result(None))
+    ended = threading.Event()
+    watcher = threading.Thread(target=_wake_on_stop, args=(wake, ended), name="stop_watch",
+                               daemon=True)
+    watcher.start()
     executor.add_node(node)
     try:
-        while rclpy.ok() and not done.done() and not STOP.requested:
-            executor.spin_until_future_complete(done, timeout_sec=timeout_sec)
+        while rclpy.ok() and not wake.done() and not STOP.requested:
+            executor.spin_until_future_complete(wake, timeout_sec=timeout_sec)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
@@ -81,10 +98,27 @@ def spin(node: Node, executor=None, timeout_sec: float = 0.5, done: Future | Non
         if rclpy.ok():
             raise
     finally:
+        ended.set()
         try:
             executor.remove_node(node)
         except Exception:  # noqa: BLE001, S110 - the context may already be shut down
             pass
+
+
+#: how often the stop watcher looks at STOP (s): the stop's latency beyond the callback
+#: in progress; a wake-up costs microseconds of the GIL
+_STOP_POLL_S = 0.05
+
+
+def _wake_on_stop(wake: Future, ended: threading.Event) -> None:
+    """Complete `wake` once SIGINT/SIGTERM was noted (STOP), until the spin has ended.
+    A helper thread: named, and at normal priority whatever the node's (docs/realtime.md)."""
+    set_thread_name("stop_watch")
+    make_normal()
+    while not ended.wait(_STOP_POLL_S):
+        if STOP.requested:
+            wake.set_result(None)
+            return
 
 
 class _Stop:
@@ -114,7 +148,7 @@ def hold_stop_signals() -> None:
     of 6 stops under `ros2 launch`, which forwards SIGINT while the terminal or `timeout`
     signals the group: two signals), and a subscription callback publishing on the shut
     context is logged as [FATAL] with a traceback. So run() starts rclpy without its
-    handlers and this one only notes the stop; spin() ends at its next turn (<= 0.5 s), and
+    handlers and this one only notes the stop; spin() ends after the callback in progress, and
     run() then shuts the context down and finishes the node however many signals came.
     """
     for s in (signal.SIGINT, signal.SIGTERM):
