@@ -78,7 +78,12 @@ from forearm_dynamics.processes import Child, claim_domain, ros_env
 
 GAP_S = 0.3
 ATTACH_END_S = 2.0  # --attach: the reference silent this long (gaps are GAP_S) = the end
-WAIT_S = 0.05  # lockstep: the longest wait for a reference before stepping without it
+#: lockstep: the longest wait (wall clock) for a reference before stepping without it. A
+#: hang guard, not a deadline: the loop runs in simulated time, so waiting costs nothing
+#: but wall time, and the reference (reliable) always comes unless the movement ended.
+#: It was 0.05 s: at load 7.6 (CI) references delayed that long were stepped over and
+#: movement 1's pro/sup missed by 0.046 rad RMS (0 stale steps at load 3).
+WAIT_S = 2.0
 #: PD bandwidth (rad/s): 5 Hz in lockstep (the loop delay is one step, always), 2 Hz in
 #: real time (arm_sim stalls on a loaded machine are tens of ms of loop delay)
 OMEGA = {True: 2 * math.pi * 5.0, False: 2 * math.pi * 2.0}
