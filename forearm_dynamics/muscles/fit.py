@@ -36,7 +36,8 @@ our BSD-3 package can carry (Apache-2.0; MoBL-ARMS is non-commercial). What the 
    with the moment arm's integral; a step off by more than JUMP_TOL is a jump (the path
    switched sides of a wrap). Fitting samples whose residual is an outlier (> OUTLIER_K ×
    robust σ and > 1 mm) are excluded and refitted (at most 2 % per muscle); both are reported.
-6. Errors per (muscle, joint) pair on held-out samples (RMS, max) are written into the file.
+6. Errors per (muscle, joint) pair on held-out samples (RMS, max, sign errors) are written
+   into the file; `--docs` writes them into docs/muscles.md (fit_report.py).
 """
 
 from __future__ import annotations

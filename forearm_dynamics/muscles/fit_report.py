@@ -24,6 +24,7 @@ def pairs_markdown(doc: dict) -> str:
     worst = sorted(rows, reverse=True)
     n_terms = sum(len(m["surrogate"]["exponents"]) * (1 + len(m["spans"])) for m in doc["muscles"])
     f = doc["fit"]
+    recorded = all("sign_violations" in m["fit"] for m in doc["muscles"])
     out = [
         (f"Fit: {f['samples']} uniform + {f.get('edge_samples', 0)} face/corner postures, "
         f"checked on {f['held_out']} held-out + {f.get('edge_held_out', 0)} face/corner "
@@ -42,8 +43,9 @@ def pairs_markdown(doc: dict) -> str:
     out += ["", "Pairs above 1 mm RMS over the full ranges (RMS / max mm): " + (", ".join(
         f"{n} {j} {r:.2f} / {mx:.1f}" for r, mx, _, _, n, j in worst if r > 1.0) or "none") + ".",
         "Sign errors (held-out postures where |r| > 1 mm, or a one-signed pair, and the "
-        "surrogate has the other sign): " + (", ".join(
-            f"{n} {j} {v}" for _, _, _, v, n, j in rows if v) or "none") + ".", "",
+        "surrogate has the other sign): " + ((", ".join(
+            f"{n} {j} {v}" for _, _, _, v, n, j in rows if v) or "none") if recorded
+            else "not recorded in this file") + ".", "",
         ("<details><summary>Every pair: RMS / max over the full ranges, RMS in the movements' "
         "box (mm)</summary>"), "",
         "| muscle | degree | pairs: joint full RMS / max, box RMS |", "|---|---|---|"]
