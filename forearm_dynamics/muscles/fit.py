@@ -157,6 +157,13 @@ class MyoArm:
             R[k] = -self._J[self.tendons][:, self.dofadr] * self.sign
         return L, R
 
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """The source's own joint limits at our joints (rad, our signs): past them (our wrist
+        flexes to 80°, MyoArm's to 45°) its paths are geometry it was never built for."""
+        m = self.m
+        r = m.jnt_range[[m.jnt_qposadr.tolist().index(a) for a in self.qadr]] * self.sign[:, None]
+        return r.min(axis=1), r.max(axis=1)
+
     def parameters(self, a_index: int) -> dict[str, float]:
         m = self.m
         a = self.actuators[a_index]
@@ -275,6 +282,7 @@ def write_heldout(src: MyoArm, path: Path, rng, n: int = 120, n_edge: int = 6) -
     np.savez_compressed(path, names=np.array(src.names), q=q, length=L.astype(f32),
                         moment_arm=R.astype(f32), q_box=qb, moment_arm_box=Rb.astype(f32),
                         q_edge=qe, moment_arm_edge=Re.astype(f32),
+                        source_lo=src.joint_limits()[0], source_hi=src.joint_limits()[1],
                         source=np.array(f"MyoArm myo_sim {src.version}; Apache-2.0"))
 
 
