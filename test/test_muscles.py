@@ -7,6 +7,9 @@ Bounds and why:
 - surrogate vs MuJoCo's own geometry on held-out postures: the RMS the fit script recorded
   for each pair (+ 0.2 mm for the new sample) and 1.5 mm RMS for every pair inside the
   library's movement box; the file's full-range errors are reported in docs/muscles.md;
+- moment-arm sign vs the source (held-out uniform and box-face postures): the source's sign
+  wherever |r| > 1 mm or the pair is one-signed in the source (> 0.1 mm), inside MyoArm's
+  own joint limits, and over our whole ranges for the elbow and pro/sup muscles;
 - daqp vs scipy's bounded least squares (BVLS, an independent algorithm on the same
   optimum): 1e-5 in every activation.
 """
