@@ -7,8 +7,8 @@
   where the peak activation >= 0.05; frames rejected (reserve use, torque mismatch) stay few;
 - the exact-geometry solve (MuJoCo tendon Jacobians + scipy BVLS, cached beside it): the
   same bound as against OpenSim, RMS(Δa) <= 0.01 per muscle (what differs is the surrogate's
-  geometry error alone; known to fail for BRA, 0.017: at full elbow extension its surrogate
-  moment arm is -0.51 mm where MyoArm's is +0.68 mm, so the QP cannot use it as a flexor);
+  geometry error alone; BRA was 0.017 while its surrogate had -0.51 mm at full elbow
+  extension where MyoArm has +0.68 mm; the fit now keeps the source's sign there);
 - OpenSim live on a few frames (slow): the model is built here and SO run now, so the cached
   file is not the only evidence;
 - bag_muscles: a bag of joint_torques in, muscle_forces and muscle_reserves out, read back by
@@ -84,11 +84,6 @@ def test_our_static_optimisation_matches_opensim(compared):
     assert f.passes()
 
 
-# Issue 31's target, not met: BRA's surrogate moment arm at full elbow extension is -0.51 mm
-# where MyoArm's is +0.68 mm (activation RMS 0.017 > 0.01). strict: it fails the day the fit
-# keeps the sign (the refit with sign checks is drafted in the muscle-fix branch history).
-@pytest.mark.xfail(strict=True, reason="issue 31 open: BRA surrogate sign at full elbow extension "
-                   "(activation RMS 0.017 vs the exact geometry, bound 0.01)")
 @pytest.mark.slow
 def test_surrogate_geometry_against_the_exact_geometry_solve(compared):
     ref, mm, A = compared[:3]

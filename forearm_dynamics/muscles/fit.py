@@ -19,22 +19,30 @@ our BSD-3 package can carry (Apache-2.0; MoBL-ARMS is non-commercial). What the 
    fibre longer than its path: LTs = 0, L0 = lengthrange[1] / range[1]), pennation 0 (rigid tendon,
    fibre along the path); max contraction velocity 10 L0/s (DeGroote-Fregly's curves are
    scaled for it; MyoArm's forearm class keeps MuJoCo's default vmax 1.5 of its own curve).
-4. Samples postures uniformly over our joints' ranges (README table) and fits, per muscle,
-   polynomials of the joints it crosses (total degree chosen per muscle, the smallest that
-   reaches 1 mm on held-out samples, at most MAX_DEGREE) to the source's own length
-   (`ten_length`) and moment arms (−`ten_J`, MuJoCo's analytic tendon Jacobian, not a
-   finite difference of the length).
+4. Samples postures uniformly over our joints' ranges (README table), plus the faces and
+   corners of the box (`edge_postures`: one or two joints at a range edge, where a uniform
+   sample rarely goes and the library's movements often hold a joint, e.g. the elbow at 0),
+   and fits, per muscle, polynomials of the joints it crosses (total degree chosen per
+   muscle, the smallest that reaches 1 mm on held-out samples with no sign error, at most
+   MAX_DEGREE and MAX_TERMS) to the source's own length (`ten_length`) and moment arms
+   (−`ten_J`, MuJoCo's analytic tendon Jacobian, not a finite difference of the length).
+   Sign: wherever the source's moment arm is clearly non-zero (|r| > SIGN_MIN_M), and
+   everywhere a pair is one-signed in the source (|r| > ONE_SIGNED_MIN_M: BRA flexes the
+   elbow even at 0°, +0.68 mm), the fitted moment arm must have the source's sign; a least
+   squares fit that misses it somewhere is refitted with those postures as constraints
+   (`constrained_fit`: a QP, daqp). Checked on held-out postures and their own faces and
+   corners (`sign_violations` per pair in the file).
 5. Path-wrapping artefacts: 1° sweeps of each (muscle, joint) pair compare the length's step
    with the moment arm's integral; a step off by more than JUMP_TOL is a jump (the path
    switched sides of a wrap). Fitting samples whose residual is an outlier (> OUTLIER_K ×
    robust σ and > 1 mm) are excluded and refitted (at most 2 % per muscle); both are reported.
-6. Errors per (muscle, joint) pair on held-out samples (RMS, max) are written into the file.
+6. Errors per (muscle, joint) pair on held-out samples (RMS, max, sign errors) are written
+   into the file; `--docs` writes them into docs/muscles.md (fit_report.py).
 """
 
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
 import time
@@ -44,6 +52,17 @@ from pathlib import Path
 import numpy as np
 
 from ..description import JOINT_NAMES, load_description
+from .fit_core import (
+    JUMP_WAIVE_DEG,
+    MAX_DEGREE,
+    MAX_TERMS,
+    ONE_SIGNED_MIN_M,
+    SIGN_MIN_M,
+    design,
+    edge_postures,
+    fit_muscle,
+)
+from .fit_report import write_docs
 
 #: our joint -> (MyoArm joint, sign): our angle = sign * MyoArm's angle.
 JOINT_MAP: dict[str, tuple[str, int]] = {
@@ -86,11 +105,7 @@ SIGN_CHECKS = (
 SHOULDER_ONLY = ("DELT1", "DELT2", "DELT3", "SUPSP", "INFSP", "SUBSC", "TMIN", "TMAJ",
                  "PECM1", "PECM2", "PECM3", "LAT1", "LAT2", "LAT3", "CORB")
 
-TARGET_M = 1e-3  # the issue's target: RMS <= 1 mm per (muscle, DOF) pair
-MAX_DEGREE = 5
-MAX_TERMS = 462
 JUMP_TOL = 5e-4  # m: length step not explained by the moment arm over a 1° step
-OUTLIER_K = 6.0
 N_FIT = 20000
 N_TEST = 4000
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "data" / "muscles_myoarm.json"
@@ -142,6 +157,13 @@ class MyoArm:
             R[k] = -self._J[self.tendons][:, self.dofadr] * self.sign
         return L, R
 
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """The source's own joint limits at our joints (rad, our signs): past them (our wrist
+        flexes to 80°, MyoArm's to 45°) its paths are geometry it was never built for."""
+        m = self.m
+        r = m.jnt_range[[m.jnt_qposadr.tolist().index(a) for a in self.qadr]] * self.sign[:, None]
+        return r.min(axis=1), r.max(axis=1)
+
     def parameters(self, a_index: int) -> dict[str, float]:
         m = self.m
         a = self.actuators[a_index]
@@ -166,17 +188,6 @@ def joint_box() -> tuple[np.ndarray, np.ndarray]:
     lo = np.array([ranges[n][0] for n in JOINT_NAMES], float)
     hi = np.array([ranges[n][1] for n in JOINT_NAMES], float)
     return lo, hi
-
-
-def exponents(n_vars: int, degree: int) -> np.ndarray:
-    """All monomials of total degree <= degree in n_vars variables, (K, n_vars) ints."""
-    out = [e for d in range(degree + 1)
-           for e in itertools.product(range(d + 1), repeat=n_vars) if sum(e) == d]
-    return np.array(out, int).reshape(-1, n_vars)
-
-
-def design(x: np.ndarray, exps: np.ndarray) -> np.ndarray:
-    return np.prod(x[:, None, :] ** exps[None, :, :], axis=2)
 
 
 def find_spans(src: MyoArm, lo, hi, rng) -> list[list[int]]:
@@ -222,35 +233,6 @@ def find_jumps(src: MyoArm, spans, lo, hi, rng, n_base: int = 6) -> list[dict]:
     return found
 
 
-def fit_muscle(xf, Lf, Rf, xt, Lt, Rt, span) -> dict:
-    """Smallest degree reaching TARGET_M on held-out samples; outliers excluded, reported."""
-    best = None
-    for degree in range(1, MAX_DEGREE + 1):
-        exps = exponents(len(span), degree)
-        if len(exps) > MAX_TERMS:
-            break
-        A = design(xf[:, span], exps)
-        Y = np.column_stack([Lf, Rf[:, span]])
-        keep = np.ones(len(A), bool)
-        for _ in range(3):
-            coef, *_ = np.linalg.lstsq(A[keep], Y[keep], rcond=None)
-            res = np.abs(A @ coef - Y)
-            sigma = 1.4826 * np.median(res, axis=0) + 1e-12
-            out = ((res > OUTLIER_K * sigma) & (res > TARGET_M)).any(axis=1)
-            if out.sum() > 0.02 * len(A) or np.array_equal(~out, keep):
-                break
-            keep = ~out
-        At = design(xt[:, span], exps)
-        Yt = np.column_stack([Lt, Rt[:, span]])
-        err = At @ coef - Yt
-        rms = np.sqrt(np.mean(err ** 2, axis=0))
-        best = {"degree": degree, "exps": exps, "coef": coef, "rms": rms,
-                "max": np.abs(err).max(axis=0), "excluded": int((~keep).sum())}
-        if rms.max() <= TARGET_M:
-            break
-    return best
-
-
 def movement_box() -> tuple[np.ndarray, np.ndarray]:
     """The box the library's 65 movements stay in (each joint's min and max)."""
     from ..movements import movement_library
@@ -280,19 +262,27 @@ def envelope_errors(src, muscles, center, half, rng, n: int = 2000) -> None:
 HELDOUT = Path(__file__).resolve().parents[2] / "test" / "data" / "muscles_myoarm_heldout.npz"
 
 
-def write_heldout(src: MyoArm, path: Path, rng, n: int = 120) -> None:
+def write_heldout(src: MyoArm, path: Path, rng, n: int = 120, n_edge: int = 6) -> None:
     """The source's exact geometry at postures the fit never saw (test_muscles.py): n over
-    our joints' ranges, n inside the library's movement box."""
+    our joints' ranges, n inside the library's movement box, and n_edge postures per face
+    of the range box (each joint at either edge: where a sign goes wrong first)."""
     lo, hi = joint_box()
     q = rng.uniform(lo, hi, size=(n, 20))
     L, R = src.evaluate(q)
     blo, bhi = movement_box()
     qb = rng.uniform(blo, bhi, size=(n, 20))
     _, Rb = src.evaluate(qb)
+    qe = np.repeat(rng.uniform(lo, hi, size=(n_edge, 20))[None], 40, axis=0)
+    for j in range(20):
+        qe[2 * j, :, j], qe[2 * j + 1, :, j] = lo[j], hi[j]
+    qe = qe.reshape(-1, 20)
+    _, Re = src.evaluate(qe)
     path.parent.mkdir(parents=True, exist_ok=True)
     f32 = np.float32  # 0.03 µm at 0.3 m: far below the errors compared
     np.savez_compressed(path, names=np.array(src.names), q=q, length=L.astype(f32),
                         moment_arm=R.astype(f32), q_box=qb, moment_arm_box=Rb.astype(f32),
+                        q_edge=qe, moment_arm_edge=Re.astype(f32),
+                        source_lo=src.joint_limits()[0], source_hi=src.joint_limits()[1],
                         source=np.array(f"MyoArm myo_sim {src.version}; Apache-2.0"))
 
 
@@ -312,11 +302,24 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
     Lf, Rf = src.evaluate(qf)
     Lt, Rt = src.evaluate(qt)
     xf, xt = (qf - center) / half, (qt - center) / half
+    qef, moved_f = edge_postures(qf, lo, hi, spans)  # fitted (bases: fitting postures)
+    qet, moved_t = edge_postures(qt, lo, hi, spans)  # checked only (bases: held-out ones)
+    Lef, Ref = src.evaluate(qef)
+    Let, Ret = src.evaluate(qet)
+    xef, xet = (qef - center) / half, (qet - center) / half
     jumps = find_jumps(src, spans, lo, hi, rng)
     muscles = []
     for i, name in enumerate(src.names):
         span = spans[i]
-        fit = fit_muscle(xf, Lf[:, i], Rf[:, i], xt, Lt[:, i], Rt[:, i], span)
+        uf = np.array([mv <= set(span) for mv in moved_f])
+        ut = np.array([mv <= set(span) for mv in moved_t])
+        jx = {k: [(math.radians(jp["at_deg"]) - center[j]) / half[j] for jp in jumps
+                  if jp["muscle"] == name and jp["joint"] == JOINT_NAMES[j]]
+              for k, j in enumerate(span)}
+        width = {k: math.radians(JUMP_WAIVE_DEG) / half[j] for k, j in enumerate(span)}
+        fit = fit_muscle(xf, Lf[:, i], Rf[:, i], xt, Lt[:, i], Rt[:, i], span,
+                         (xef[uf], Lef[uf, i], Ref[uf, i]), (xet[ut], Let[ut, i], Ret[ut, i]),
+                         {k: v for k, v in jx.items() if v}, width)
         joints = [JOINT_NAMES[j] for j in span]
         muscles.append({
             "name": name,
@@ -337,12 +340,16 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                 "moment_arm_max_mm": {jn: round(float(fit["max"][1 + k]) * 1e3, 4)
                                       for k, jn in enumerate(joints)},
                 "excluded_samples": fit["excluded"],
+                "sign_violations": {jn: int(fit["sign_violations"][k])
+                                    for k, jn in enumerate(joints)},
+                "sign_constraints": fit["sign_constraints"],
                 "jumps": sum(1 for jp in jumps if jp["muscle"] == name),
             },
         })
         print(f"{name:8s} deg {fit['degree']} K {len(fit['exps']):4d} "
               f"L {fit['rms'][0] * 1e3:.3f} mm  r max-RMS {fit['rms'][1:].max() * 1e3:.3f} mm "
-              f"excl {fit['excluded']}", flush=True)
+              f"excl {fit['excluded']} sign viol {int(fit['sign_violations'].sum())} "
+              f"constr {fit['sign_constraints']}", flush=True)
     envelope_errors(src, muscles, center, half, rng)
     if heldout is not None:
         write_heldout(src, heldout, np.random.default_rng(seed + 1000))
@@ -376,6 +383,8 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
         "joints": {"names": list(JOINT_NAMES), "center": center.tolist(),
                    "half_range": half.tolist()},
         "fit": {"samples": N_FIT, "held_out": N_TEST, "seed": seed, "target_mm": 1.0,
+                "edge_samples": len(qef), "edge_held_out": len(qet),
+                "sign_min_mm": SIGN_MIN_M * 1e3, "one_signed_min_mm": ONE_SIGNED_MIN_M * 1e3,
                 "max_degree": MAX_DEGREE, "max_terms": MAX_TERMS,
                 "jump_tolerance_mm": JUMP_TOL * 1e3, "jumps": jumps[:200],
                 "n_jumps": len(jumps), "seconds": round(time.perf_counter() - t0, 1)},
@@ -393,7 +402,12 @@ def main(argv=None) -> int:
                     help="where to write the held-out source geometry the tests compare with")
     ap.add_argument("--xml", type=Path, default=None,
                     help="a MuJoCo model of your own (MyoArm's joint names) instead of MyoArm")
+    ap.add_argument("--docs", type=Path, nargs="?", const=Path("docs/muscles.md"),
+                    help="only rewrite the per-pair error block of this doc from the -o file")
     args = ap.parse_args(argv)
+    if args.docs is not None:
+        write_docs(json.loads(args.output.read_text(encoding="utf-8")), args.docs)
+        return 0
     doc = build(args.output, args.seed, None if args.xml else args.heldout, args.xml)
     pairs = [(m["fit"]["moment_arm_rms_mm"][j], m["name"], j)
              for m in doc["muscles"] for j in m["spans"]]
