@@ -47,11 +47,12 @@ MUSCLE_SPECS = (
     Spec("passive", False, "subtract the passive fibre forces' torques before the QP (false: "
          "like OpenSim's static optimisation, which leaves them out)"),
     Spec("qos_depth", 1000, "history depth of the outputs", "messages", 1, 100000),
-    Spec("input_depth", 10000, "history depth of the joint_torques input (best effort by "
-         "default): the backlog this node may fall behind before a sample is lost; 10000 = 10 s "
-         "at 1 kHz (measured, benchmarks/muscle_node.py at load 1-4: with 1000 the backlog "
-         "reached 1 s in CPU stalls and 2 606 of 97 500 samples were dropped)", "messages", 1,
-         1000000),
+    Spec("input_depth", 5000, "history depth of the joint_torques input (best effort by "
+         "default): how far (samples) this node may fall behind in a CPU stall before a sample "
+         "is lost; 5000 = 5 s at 1 kHz, the most Fast DDS keeps for a reader (its default "
+         "resource limit max_samples: python -m benchmarks.reader_depth). With 1000 the backlog "
+         "reached 1 s and 2 606 of 97 500 samples were dropped (benchmarks/muscle_node.py, "
+         "load 1-3.6)", "messages", 1, 100000),
     Spec("qos_reliable", True, "reliable (true) or best-effort (false) outputs"),
     Spec("input_reliable", False, "reliable (true) or best-effort (false) joint_torques input. "
          "Best effort by default so the torque path never waits for the muscles: a reliable "
