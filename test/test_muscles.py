@@ -400,3 +400,27 @@ def test_daqp_agrees_with_scipy_bounded_least_squares(mm, arm):
         assert ref.success
         np.testing.assert_allclose(s.activations, ref.x, atol=1e-5)
         np.testing.assert_allclose(s.reserves, tau[k] - A @ ref.x, atol=1e-5)
+
+
+def test_the_nodes_buffered_geometry_and_solve_equal_the_allocating_path(mm, arm):
+    """muscle_node writes the geometry into arrays made once (geometry(out=)) and the optimizer
+    reuses its scratch: the numbers must be the allocating path's, bit for bit, sample after
+    sample (a buffer read before its sample is written, or a stale entry, would show here)."""
+    mv = movement_library()[40]
+    q, qd, qdd = mv.evaluate(mv.sample_times(100))
+    tau = arm.inverse_dynamics(q, qd, qdd)
+    out = mm.geometry_outputs()
+    so_buf, so_new = StaticOptimizer(mm), StaticOptimizer(mm)
+    for k in range(len(q)):
+        R, L, V = mm.geometry(q[k], qd[k])
+        Rb, Lb, Vb = mm.geometry(q[k], qd[k], out)
+        assert Rb is out[0] and Lb is out[1] and Vb is out[2]
+        for x, y in ((R, Rb), (L, Lb), (V, Vb)):
+            assert np.array_equal(x, y)
+        a = so_new.solve_geometry(R, L, V, tau[k])
+        b = so_buf.solve_geometry(Rb, Lb, Vb, tau[k])
+        for f in ("activations", "forces", "reserves"):
+            assert np.array_equal(getattr(a, f), getattr(b, f)), (k, f)
+    spanned = np.zeros_like(out[0], bool)
+    spanned[mm.surrogate.pair_rows, mm.surrogate.pair_cols] = True
+    assert np.all(out[0][~spanned] == 0.0) and np.any(out[0][spanned] != 0.0)

@@ -60,8 +60,10 @@ def fibre_state(length, velocity, l0, lts, alpha0):
 class UnitForces:
     """unit_forces for one model with its constants precomputed: the per-sample hot path.
 
-    Same numbers as unit_forces (test_muscles checks); fewer numpy calls per sample (each
-    costs microseconds in a node that sleeps between samples)."""
+    Same numbers as unit_forces, bit for bit on the rigid, non-pennate path (test_muscles
+    checks): the same operations in the same order, written into arrays made once here
+    (each numpy call costs microseconds in a node that sleeps between samples; an allocation
+    more). The arrays returned are those buffers: read them before the next call."""
 
     def __init__(self, model_params, *, use_velocity: bool = True, passive: bool = False):
         f0, l0, lts, alpha0, vmax = (np.asarray(p, float) for p in model_params)
@@ -71,17 +73,38 @@ class UnitForces:
         self.pennate = bool(np.any(alpha0 != 0))
         self.v_scale = _D2 / (vmax * l0)
         self.use_velocity, self.passive = use_velocity, passive
+        n = len(f0)
+        self._ln, self._fl, self._fv, self._unit = (np.empty(n) for _ in range(4))
+        self._g, self._d = np.empty((n, 3)), np.empty((n, 3))
+        self._zeros = np.zeros(n)
 
     def __call__(self, length, velocity):
         if self.pennate or self.passive:
             return unit_forces(self.params, length, velocity, use_velocity=self.use_velocity,
                                passive=self.passive)
-        ln = np.maximum(length - self.lts, 1e-6) * self.inv_l0
+        # ln = max(length - lts, 1e-6) / L0;  fl = exp(-0.5 ((ln - b2) / (b3 + b4 ln))²) · b1
+        ln, g, d, fl = self._ln, self._g, self._d, self._fl
+        np.subtract(length, self.lts, out=ln)
+        np.maximum(ln, 1e-6, out=ln)
+        np.multiply(ln, self.inv_l0, out=ln)
         lc = ln[:, None]
-        fl = np.exp(-0.5 * ((lc - _B2) / (_B3 + _B4 * lc)) ** 2) @ _B1
-        if self.use_velocity:
-            fl *= _D1 * np.arcsinh(self.v_scale * velocity + _D3) + _D4
-        return self.f0 * fl, np.zeros_like(fl)
+        np.subtract(lc, _B2, out=g)
+        np.multiply(_B4, lc, out=d)
+        np.add(_B3, d, out=d)
+        np.divide(g, d, out=g)
+        np.square(g, out=g)
+        np.multiply(-0.5, g, out=g)
+        np.exp(g, out=g)
+        np.matmul(g, _B1, out=fl)
+        if self.use_velocity:  # fl *= d1 asinh(v_scale v + d3) + d4
+            fv = self._fv
+            np.multiply(self.v_scale, velocity, out=fv)
+            np.add(fv, _D3, out=fv)
+            np.arcsinh(fv, out=fv)
+            np.multiply(_D1, fv, out=fv)
+            np.add(fv, _D4, out=fv)
+            np.multiply(fl, fv, out=fl)
+        return np.multiply(self.f0, fl, out=self._unit), self._zeros
 
 
 def unit_forces(model_params, length, velocity, *, use_velocity: bool = True,

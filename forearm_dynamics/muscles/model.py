@@ -87,15 +87,29 @@ class MuscleModel:
         """Muscle-tendon lengths (m): q (20,) -> (n,); (N, 20) -> (N, n)."""
         return self.surrogate.lengths(_posture(q, "q"))
 
-    def geometry(self, q, qd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def geometry(self, q, qd, out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(R, L, V) of one sample: moment arms (n, 20), lengths (n,), path velocities
-        (n,) m/s, lengthening positive (V = −R·q̇, since R = −∂L/∂q)."""
-        q = _posture(q, "q")
-        qd = _posture(qd, "qd")
-        if q.ndim != 1 or qd.ndim != 1:
-            raise MuscleModelError("geometry() takes one sample: q and qd of shape (20,)")
-        R, L = self.surrogate.evaluate(q)
-        return R, L, -(R @ qd)
+        (n,) m/s, lengthening positive (V = −R·q̇, since R = −∂L/∂q). New arrays, or
+        written into out = geometry_outputs() (a node's per-sample path: no allocation, the
+        values the same to the bit; q and qd then float arrays (20,) the caller has checked
+        finite, as the node's decode does)."""
+        if out is None:
+            q = _posture(q, "q")
+            qd = _posture(qd, "qd")
+            if q.ndim != 1 or qd.ndim != 1:
+                raise MuscleModelError("geometry() takes one sample: q and qd of shape (20,)")
+            R, L = self.surrogate.evaluate(q)
+            return R, L, -(R @ qd)
+        R, L, V = out
+        self.surrogate.evaluate(q, (R, L))
+        np.matmul(R, qd, out=V)
+        np.negative(V, out=V)
+        return R, L, V
+
+    def geometry_outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Arrays for geometry(q, qd, out=...): (R (n, 20), L (n,), V (n,))."""
+        return (*self.surrogate.new_outputs(), np.zeros(self.n))
 
     def config(self) -> dict[str, Any]:
         """What the node announces on ~/config: muscle set, source, licence, scaling."""

@@ -88,6 +88,10 @@ class StaticOptimizer:
         self._bl = np.concatenate([np.zeros(n), np.full(nj, -_INF), np.zeros(nj)])
         self._sense = np.concatenate([np.zeros(n + nj), np.full(nj, _EQ)]).astype(np.int32)
         self._qp = None
+        self._A_muscles = self._A[:, :n]  # a view: the columns each sample rewrites
+        self._rhs_u, self._rhs_l = self._bu[n + nj:], self._bl[n + nj:]
+        self._res = np.empty(nj)  # the residual's scratch
+        self._saturated = 1.0 - self.saturation_tol
 
     def reset(self) -> None:
         """Forget the warm start (a new recording, a changed model)."""
@@ -95,10 +99,10 @@ class StaticOptimizer:
 
     def _problem(self, R: np.ndarray, L: np.ndarray, V: np.ndarray, tau: np.ndarray):
         unit, pas = self._unit(L, V)
-        self._A[:, : self._n] = (R * unit[:, None]).T
+        np.multiply(R.T, unit, out=self._A_muscles)  # A[j, i] = R[i, j] · unit[i]
         rhs = tau - R.T @ pas if self.passive else tau
-        self._bu[-self._nj:] = rhs
-        self._bl[-self._nj:] = rhs
+        self._rhs_u[:] = rhs
+        self._rhs_l[:] = rhs
         return unit, pas
 
     def _cold(self):
@@ -124,11 +128,18 @@ class StaticOptimizer:
             a = np.full(n, np.nan)
             r = np.full(self._nj, np.nan)
             return MuscleSolution(a, a.copy(), r, True, dt, float("nan"), iters, flag)
-        a = np.clip(x[:n], 0.0, 1.0)
+        a = np.maximum(x[:n], 0.0)  # np.clip(x, 0, 1), in two ufunc calls (clip costs ~5 µs)
+        np.minimum(a, 1.0, out=a)
         r = x[n:]
-        forces = a * unit + pas
-        residual = float(np.max(np.abs(R.T @ forces + r - tau)))
-        infeasible = bool(np.any(a >= 1.0 - self.saturation_tol))
+        forces = a * unit
+        forces += pas
+        res = self._res  # |R·F + r − τ|
+        np.matmul(R.T, forces, out=res)
+        res += r
+        res -= tau
+        np.abs(res, out=res)
+        residual = float(res.max())
+        infeasible = bool(a.max() >= self._saturated)
         return MuscleSolution(a, forces, r, infeasible, dt, residual, iters, flag)
 
     def solve(self, q, qd, tau) -> MuscleSolution:

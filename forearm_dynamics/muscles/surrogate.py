@@ -22,6 +22,11 @@ from scipy import sparse
 
 from ..description import JOINT_NAMES
 
+try:  # what `csr_matrix @ vector` runs, without its Python-level checks (~6 µs a sample)
+    from scipy.sparse._sparsetools import csr_matvec as _csr_matvec
+except ImportError:  # pragma: no cover - a scipy that moved it: the public product
+    _csr_matvec = None
+
 _CHUNK = 2048  # samples per block in the batch path (memory: chunk × monomials)
 #: Coefficients dropped per row while the sum of their magnitudes stays below this (m): on
 #: the clipped box every |monomial| <= 1, so a row moves by at most PRUNE_M (0.02 mm) and the
@@ -62,6 +67,7 @@ class Surrogate:
         self.n = n
         self._xe = np.ones(len(JOINT_NAMES) + 1)
         self._mono = np.ones(len(keys))
+        self._vals = np.zeros(coef.shape[0])
         pos = {k: i for i, k in enumerate(keys)}
         degree = np.array([sum(k) for k in keys])
         if len(keys) == 0 or degree[0] != 0 or np.any(np.diff(degree) < 0):
@@ -80,6 +86,9 @@ class Surrogate:
             self.levels.append((slice(int(at[0]), int(at[-1]) + 1), np.array(parents)))
             variables += var
         self.variables = np.array(variables)
+        # one sample's scratch: the parents' values of the widest level, the variables
+        self._parents = np.empty(max((len(p) for _, p in self.levels), default=0))
+        self._xv = np.empty(len(self.variables))
 
     @classmethod
     def from_doc(cls, joints: dict, spans: Sequence[Sequence[str]], rows: Sequence[dict], *,
@@ -181,17 +190,46 @@ class Surrogate:
             np.multiply(mono[..., parent], xv[..., sl], out=mono[..., sl])
         return mono
 
-    def evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """One posture (20,) -> (moment arms (n, 20), lengths (n,))."""
+    def _monomials_one(self, xe: np.ndarray) -> np.ndarray:
+        """_monomials for one posture, into arrays made once (same products, same order)."""
+        mono, xv, par = self._mono, self._xv, self._parents
+        xe.take(self.variables, out=xv)
+        for sl, parent in self.levels:
+            p = par[: len(parent)]
+            mono.take(parent, out=p)
+            np.multiply(p, xv[sl], out=mono[sl])
+        return mono
+
+    def new_outputs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(R (n, 20), L (n,)) for evaluate(q, out=...): R's unspanned entries stay 0."""
+        return np.zeros((self.n, len(JOINT_NAMES))), np.zeros(self.n)
+
+    def evaluate(self, q: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """One posture (20,) -> (moment arms (n, 20), lengths (n,)): new arrays, or written
+        into out = new_outputs() (the per-sample path: no allocation)."""
         xe = self._xe
         np.subtract(q, self.center, out=xe[1:])
         xe[1:] *= self.inv_half
         np.minimum(xe, 1.0, out=xe)
         np.maximum(xe, -1.0, out=xe)
-        vals = self.coef @ self._monomials(xe, self._mono)
-        R = np.zeros(self.n * len(JOINT_NAMES))
-        R[self.pair_flat] = vals[self.n:]
-        return R.reshape(self.n, len(JOINT_NAMES)), vals[: self.n]
+        mono = self._monomials_one(xe)
+        c = self.coef
+        if _csr_matvec is None:
+            vals = c @ mono
+        else:
+            vals = self._vals
+            vals.fill(0.0)  # csr_matvec adds to it, as scipy's own product starts from zeros
+            _csr_matvec(c.shape[0], c.shape[1], c.indptr, c.indices, c.data, mono, vals)
+        n = self.n
+        if out is None:
+            R = np.zeros(n * len(JOINT_NAMES))
+            R[self.pair_flat] = vals[n:]
+            return R.reshape(n, len(JOINT_NAMES)), vals[:n].copy()
+        R, L = out
+        np.put(R, self.pair_flat, vals[n:])
+        np.copyto(L, vals[:n])
+        return R, L
 
     def _batch(self, q: np.ndarray) -> np.ndarray:
         out = np.empty((len(q), self.coef.shape[0]))

@@ -117,6 +117,7 @@ class MuscleNode(Node):
         self.infeasible = 0
         self.solver_failed = 0
         self._max_reserve = (0.0, "")
+        self._reserve_warn = s.reserve_warn
         self._solve_ns = np.zeros(16384, np.int64)
         self._n_solve = 0
         self._count = 0
@@ -129,6 +130,7 @@ class MuscleNode(Node):
         self.q, self.qd, self.tau = np.zeros(nj), np.zeros(nj), np.zeros(nj)
         self._templates: dict[bytes, tuple[OutputTemplate, StdTemplate]] = {}
         self._stamp = STAMP.unpack_from
+        self._geo = self.bundle.model.geometry_outputs()  # R, L, V: written per sample
 
         qos = stream_qos(s.qos_depth, s.qos_reliable)
         self.pub = self.create_publisher(JointState, s.output_topic, qos)
@@ -138,7 +140,7 @@ class MuscleNode(Node):
         self._worker = ModelBuilder(self._build, self._announce)
         self._publish_config(self.bundle, 0)
         self.sub = self.create_subscription(JointState, s.input_topic, self._on_torques,
-                                            stream_qos(s.qos_depth, s.input_reliable), raw=True)
+                                            stream_qos(s.input_depth, s.input_reliable), raw=True)
         if s.config_topic:
             self.create_subscription(String, s.config_topic, self._on_torque_config, latched_qos())
         self.add_on_set_parameters_callback(self._on_set)
@@ -146,9 +148,6 @@ class MuscleNode(Node):
         if s.diagnostics_period > 0:
             self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self.create_timer(s.diagnostics_period, self._publish_diagnostics)
-        # first-call costs (numpy paths, the QP's set-up) now, not on the first sample
-        self.bundle.optimizer.solve(np.zeros(nj), np.zeros(nj), np.zeros(nj))
-        self.bundle.optimizer.reset()
         mm = self.bundle.model
         self.get_logger().info(
             f"{self.sub.topic_name} -> {self.pub.topic_name}"
@@ -202,10 +201,11 @@ class MuscleNode(Node):
             if nxt.model.names != self.bundle.model.names:
                 self._templates.clear()
             self.bundle = nxt
+            self._geo = nxt.model.geometry_outputs()
             self.applies_from = sec * 1_000_000_000 + nsec
             self._worker.announce(nxt, self.applies_from)
         b = self.bundle
-        R, L, V = b.model.geometry(self.q, self.qd)
+        R, L, V = b.model.geometry(self.q, self.qd, self._geo)
         sol = b.optimizer.solve_geometry(R, L, V, self.tau)
         tpl = self._templates.get(frame_id)
         if tpl is None:
@@ -224,11 +224,12 @@ class MuscleNode(Node):
         if self.reserves_pub is not None:
             self.reserves_pub.publish(res.fill(sec, nsec, sol.reserves))
         t_end = _perf_ns()
-        big = float(np.abs(sol.reserves).max())
-        if big > self.settings.reserve_warn:
+        absr = np.abs(sol.reserves)
+        big = float(absr.max())
+        if big > self._reserve_warn:
             self.reserve_use += 1
             if big > self._max_reserve[0]:
-                self._max_reserve = (big, JOINT_NAMES[int(np.abs(sol.reserves).argmax())])
+                self._max_reserve = (big, JOINT_NAMES[int(absr.argmax())])
         self._solve_ns[self._n_solve % len(self._solve_ns)] = round(sol.solve_time * 1e9)
         self._n_solve += 1
         st.published += 1
@@ -281,14 +282,7 @@ class MuscleNode(Node):
         return t
 
     def _warn(self, r: v.Rejection) -> None:
-        now = time.monotonic()
-        last, suppressed = self._warned.get(r.reason, (-math.inf, 0))
-        if now - last < WARN_EVERY_S:
-            self._warned[r.reason] = (last, suppressed + 1)
-            return
-        more = f" (+{suppressed} more since the last warning)" if suppressed else ""
-        self.get_logger().warning(f"rejected sample [{r.reason}]: {r.detail}{more}")
-        self._warned[r.reason] = (now, 0)
+        v.warn_rejection(self._warned, self.get_logger(), r, WARN_EVERY_S)
 
     # -- the model: own parameters or the torque node's config ----------------------------
     def _own_arm(self, values):
@@ -368,7 +362,8 @@ class MuscleNode(Node):
                        "force_velocity": s.force_velocity, "passive": s.passive,
                        "tendon": "rigid"},
             "decimation": s.decimation, "build_ms": round(b.build_ms, 3),
-            "input_qos": "reliable" if s.input_reliable else "best effort", "nice": os.nice(0),
+            "input_qos": "reliable" if s.input_reliable else "best effort",
+            "input_depth": s.input_depth, "nice": os.nice(0),
         }
 
     def _publish_config(self, b: MuscleBundle, applies_from: int | None) -> None:

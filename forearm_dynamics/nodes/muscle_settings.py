@@ -13,6 +13,8 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from ..muscles import MuscleModel, StaticOptimizer, load_muscle_model
 from .arm_viz_settings import MODEL_NAMES, VIZ_MODEL_SPECS, own_model
 from .spec import ParameterError, Settings, Spec
@@ -44,7 +46,13 @@ MUSCLE_SPECS = (
          "isometric force-length only)"),
     Spec("passive", False, "subtract the passive fibre forces' torques before the QP (false: "
          "like OpenSim's static optimisation, which leaves them out)"),
-    Spec("qos_depth", 1000, "history depth of input and outputs", "messages", 1, 100000),
+    Spec("qos_depth", 1000, "history depth of the outputs", "messages", 1, 100000),
+    Spec("input_depth", 5000, "history depth of the joint_torques input (best effort by "
+         "default): how far (samples) this node may fall behind in a CPU stall before a sample "
+         "is lost; 5000 = 5 s at 1 kHz, the most Fast DDS keeps for a reader (its default "
+         "resource limit max_samples: python -m benchmarks.reader_depth). With 1000 the backlog "
+         "reached 1 s and 2 606 of 97 500 samples were dropped (benchmarks/muscle_node.py, "
+         "load 1-3.6)", "messages", 1, 100000),
     Spec("qos_reliable", True, "reliable (true) or best-effort (false) outputs"),
     Spec("input_reliable", False, "reliable (true) or best-effort (false) joint_torques input. "
          "Best effort by default so the torque path never waits for the muscles: a reliable "
@@ -77,6 +85,7 @@ class MuscleSettings(Settings):
     force_velocity: bool
     passive: bool
     qos_depth: int
+    input_depth: int
     qos_reliable: bool
     input_reliable: bool
     executor: str
@@ -103,6 +112,10 @@ def build_bundle(settings: MuscleSettings, config_id: int, body_size: Any, side:
     mm = load_muscle_model(settings.muscle_model or None, side=side, body_size=body_size)
     so = StaticOptimizer(mm, reserve_optimal_torque=settings.reserve_optimal_torque,
                          passive=settings.passive, velocity=settings.force_velocity)
+    # first-call costs (numpy paths, the QP's set-up) here, not on the first sample it solves
+    nj = len(mm.joint_names)
+    so.solve(np.zeros(nj), np.zeros(nj), np.zeros(nj))
+    so.reset()
     return MuscleBundle(config_id, mm, so, source, arm_summary,
                         (time.perf_counter() - t0) * 1e3)
 

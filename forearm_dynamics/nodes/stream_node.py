@@ -446,15 +446,7 @@ class JointStreamNode(RealtimeNode, Node):
         self.on_first_step(d_ns)
 
     def _warn(self, r: v.Rejection) -> None:
-        """One warning per reason per WARN_EVERY_S, with the number suppressed meanwhile."""
-        now = time.monotonic()
-        last, suppressed = self._warned.get(r.reason, (-math.inf, 0))
-        if now - last < WARN_EVERY_S:
-            self._warned[r.reason] = (last, suppressed + 1)
-            return
-        more = f" (+{suppressed} more since the last warning)" if suppressed else ""
-        self.get_logger().warning(f"rejected sample [{r.reason}]: {r.detail}{more}")
-        self._warned[r.reason] = (now, 0)
+        v.warn_rejection(self._warned, self.get_logger(), r, WARN_EVERY_S)
 
     def _publish_diagnostics(self) -> None:
         v.flush_suppressed(self._warned, self.get_logger(), WARN_EVERY_S)

@@ -17,6 +17,7 @@ branch where a sample jumps by more than max_stamp_gap (or is the first one):
 
 from __future__ import annotations
 
+import math
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -174,6 +175,21 @@ def check_jump(t_ns: int, last_ns: int | None) -> None:
     if last_ns is not None and t_ns < last_ns and abs(now - last_ns) < live and now - t_ns > live:
         raise Rejection(STAMP_NOT_INCREASING, f"stamp {(last_ns - t_ns) / 1e9:.3f} s before the "
                         "previous sample of a live stream")
+
+
+def warn_rejection(warned: dict[str, tuple[float, int]], logger, r: Rejection,
+                   every_s: float) -> None:
+    """One warning line per reason per `every_s`, counting the rejections held back meanwhile
+    (flush_suppressed logs those once the window has passed). The stream nodes and
+    muscle_node share it: one rule for a bad sample's line."""
+    now = time.monotonic()
+    last, suppressed = warned.get(r.reason, (-math.inf, 0))
+    if now - last < every_s:
+        warned[r.reason] = (last, suppressed + 1)
+        return
+    more = f" (+{suppressed} more since the last warning)" if suppressed else ""
+    logger.warning(f"rejected sample [{r.reason}]: {r.detail}{more}")
+    warned[r.reason] = (now, 0)
 
 
 def flush_suppressed(warned: dict[str, tuple[float, int]], logger, every_s: float) -> None:
