@@ -84,6 +84,7 @@ from .ca_model import process_noise, steady_state, transition  # noqa: F401 - pu
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
 from .noise import NoiseEstimator
+from .practice_gain import PracticeGain
 from .smoother import FixedLagSmoother
 
 NOISE_EVERY_S = 0.25
@@ -148,6 +149,11 @@ class KalmanCA(StateEstimator):
                     "causal, positions only, coloured noise: never smooth below this band (keeps "
                     "what the offline 6 Hz practice keeps): the belief is capped where the "
                     "filter's bandwidth reaches it; 0 = off", lo=0.0, hi=1000.0),
+        SettingSpec("practice_band_hz", 6.0, "Hz",
+                    "causal, positions only: scale each joint's qd and qdd by their online "
+                    "least-squares gain on the offline practice's (zero-phase low-pass at this "
+                    "band + derivatives), measured per joint (practice_gain.py); 0 = off",
+                    lo=0.0, hi=1000.0),
         SettingSpec("delay_s", 0.0, "s",
                     "output the fixed-lag smoothed estimate of the sample this far back, "
                     "stamped with its stamp (0 = causal)", lo=0.0, hi=MAX_DELAY_S),
@@ -199,6 +205,9 @@ class KalmanCA(StateEstimator):
         self._smooth_dt = 0.0
         self._first: tuple[int, np.ndarray] | None = None
         self._jump_exact = False
+        band = v["practice_band_hz"]
+        self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
+        self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
         self.reset()
 
     # -- public state ---------------------------------------------------------------------
@@ -299,6 +308,8 @@ class KalmanCA(StateEstimator):
         self.noise_estimator.restart()
         if self._smoother is not None:
             self._smoother.restart()
+        if self._pgain is not None:
+            self._pgain.restart()
 
     def _start(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
         x = self._X
@@ -417,6 +428,8 @@ class KalmanCA(StateEstimator):
                 self.noise_estimator.shift(self._held_e[0])
                 if self._smoother is not None:
                     self._smoother.restart()
+                if self._pgain is not None:
+                    self._pgain.restart()
                 self._start(self._held_t, self._held_q, self._held_qd if vel else None)
                 dt = (t_ns - self._t_ns) * 1e-9
                 f[0, 1] = f[1, 2] = dt
@@ -454,6 +467,8 @@ class KalmanCA(StateEstimator):
             x += self._tmp3
         x += t3
         self._count += 1
+        if self._pgain is not None and not vel:
+            self._pgain.add(q, x[1], x[2])
         if held:  # the noise statistics see the prediction instead of a held joint
             self.noise_estimator.add(t_ns, np.where(gate.held, t3[0], q), qd)
         else:
@@ -468,6 +483,8 @@ class KalmanCA(StateEstimator):
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
         if self.delay_s <= 0.0:
             np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
+            if self._pgain is not None and not vel:
+                self._out[1:] *= self._gain
             self.stamp_ns = t_ns
             if self.gate.pending and self.gate.jump and self._jump_exact:
                 # held beyond the discontinuity threshold: most likely a jump (two movements
@@ -525,6 +542,14 @@ class KalmanCA(StateEstimator):
             ne.position(self._r)
             np.maximum(self._r, self._floor, out=self._r)
             np.copyto(self._r_gate, self._r)  # the gate judges with the noise as measured
+            pg = self._pgain
+            if pg is not None and pg.ready and not vel:
+                # the movement's own band, measured: the gain depends on psd / r^2 only, so
+                # a joint whose practice-band jerk has the spectral density s_j is filtered
+                # as with psd s_j (a slow reach: ~100 x below the library's 3e3)
+                s_j = np.maximum(pg.jerk_psd(), 1e-6 * self.psd)
+                self._r *= np.sqrt(self.psd / s_j)
+                np.maximum(self._r, self._floor, out=self._r)
             if not vel and self._wmin > 0.0 and ne.period_s > 0.0 and self.delay_s <= 0.0:
                 # never smooth below the practice's band: cap at the noise whose filter
                 # bandwidth (psd / (r^2 dt))^(1/6) is kalman_min_bandwidth_hz
@@ -551,6 +576,11 @@ class KalmanCA(StateEstimator):
             self._applied[1] = True
         if moved:
             self._regroup(vel, dt)
+        pg = self._pgain
+        if pg is not None and not vel and ne.period_s > 0.0:
+            pg.configure(ne.period_s)  # kernels once per rate
+            np.copyto(self._gain, pg.gain)
+            self._gain[:, self.noiseless()] = 1.0  # exact or held joints: nothing to calibrate
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""
