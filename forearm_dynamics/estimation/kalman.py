@@ -91,6 +91,7 @@ NOISE_EVERY_S = 0.25
 BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
 MAX_DELAY_S = 0.2
+EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
 COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
 # the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
 # a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
@@ -555,8 +556,8 @@ class KalmanCA(StateEstimator):
                 # bandwidth (psd / (r^2 dt))^(1/6) is kalman_min_bandwidth_hz
                 cap = math.sqrt(self.psd / (self._wmin**6 * ne.period_s))
                 white = ne.white(self._tmp)
-                white *= COLOURED_RATIO  # band level above this: coloured, capped
-                np.minimum(np.where(self._r > white, cap, np.inf), self._r, out=self._r)
+                white *= COLOURED_RATIO  # band level (as measured) above this: coloured, capped
+                np.minimum(np.where(self._r_gate > white, cap, np.inf), self._r, out=self._r)
                 np.maximum(self._r, self._floor, out=self._r)
             self._armed = moved = True
             self._applied[0] = True
@@ -580,7 +581,11 @@ class KalmanCA(StateEstimator):
         if pg is not None and not vel and ne.period_s > 0.0:
             pg.configure(ne.period_s)  # kernels once per rate
             np.copyto(self._gain, pg.gain)
-            self._gain[:, self.noiseless()] = 1.0  # exact or held joints: nothing to calibrate
+            if ne.white_evaluations:  # exact or held joints (no white level at all, even with
+                # a fixed noise belief): their q̈ is the input's own, gain 1. Not the gate's
+                # 2 x floor: a real marker elbow reads 0.017 deg there (UE-ADL) and is exactly
+                # the joint whose coloured content above 6 Hz must be calibrated away
+                self._gain[:, ne.white(self._tmp) <= EXACT_WHITE * self._floor] = 1.0
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""

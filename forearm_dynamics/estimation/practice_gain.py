@@ -35,6 +35,9 @@ REF_DELAY_S = 0.2
 TAU_S = 6.0
 EVERY_S = 0.01
 MIN_S = 0.2
+GAIN_MAX = 1.0
+PRIOR_GAIN = 0.5
+PRIOR_EVALS = 50.0
 
 
 def practice_kernels(dt: float, cutoff_hz: float, half_s: float) -> np.ndarray:
@@ -141,7 +144,11 @@ class PracticeGain:
         self._sxx += a * (x * x - self._sxx)
         if self._evals >= self._min:
             np.divide(self._sxy, np.maximum(self._sxx, 1e-300), out=self.gain)
-            np.clip(self.gain, 0.0, 1.0, out=self.gain)
+            if PRIOR_EVALS:
+                m = min(self._evals, 1.0 / self._alpha)
+                self.gain *= m / (m + PRIOR_EVALS)
+                self.gain += PRIOR_GAIN * PRIOR_EVALS / (m + PRIOR_EVALS)
+            np.clip(self.gain, 0.0, GAIN_MAX, out=self.gain)
 
     @property
     def ready(self) -> bool:
