@@ -171,6 +171,7 @@ class KalmanCA(StateEstimator):
         # per-joint noise belief (rad, rad/s); before any estimate: 0.5 deg, 1 deg/s
         self._r = np.full(n, self._fixed_r or math.radians(0.5))
         self._r_gate = self._r.copy()
+        self._r_eff = self._r.copy()  # the noise the gains are computed with (psd / r_eff^2)
         self._wmin = 2.0 * math.pi * v["kalman_min_bandwidth_hz"]
         self._rv = np.full(n, self._fixed_rv or math.radians(1.0))
         self._X = np.zeros((3, n))
@@ -327,7 +328,7 @@ class KalmanCA(StateEstimator):
     def _regroup(self, vel: bool, dt: float) -> None:
         """Bin each joint's noise (hysteresis) and rebuild the groups if the bins changed."""
         changed = vel != self._vel
-        for row, r in ((0, self._r), (1, self._rv)):
+        for row, r in ((0, self._r_eff), (1, self._rv)):
             if row == 1 and not vel:
                 if (self._bins[1] != 0).any():
                     self._bins[1].fill(0)
@@ -543,22 +544,26 @@ class KalmanCA(StateEstimator):
             ne.position(self._r)
             np.maximum(self._r, self._floor, out=self._r)
             np.copyto(self._r_gate, self._r)  # the gate judges with the noise as measured
-            pg = self._pgain
-            if pg is not None and pg.ready and not vel:
-                # the movement's own band, measured: the gain depends on psd / r^2 only, so
-                # a joint whose practice-band jerk has the spectral density s_j is filtered
-                # as with psd s_j (a slow reach: ~100 x below the library's 3e3)
-                s_j = np.maximum(pg.jerk_psd(), 1e-6 * self.psd)
-                self._r *= np.sqrt(self.psd / s_j)
-                np.maximum(self._r, self._floor, out=self._r)
+            capped = np.full(self.n, np.inf)
             if not vel and self._wmin > 0.0 and ne.period_s > 0.0 and self.delay_s <= 0.0:
                 # never smooth below the practice's band: cap at the noise whose filter
                 # bandwidth (psd / (r^2 dt))^(1/6) is kalman_min_bandwidth_hz
                 cap = math.sqrt(self.psd / (self._wmin**6 * ne.period_s))
                 white = ne.white(self._tmp)
-                white *= COLOURED_RATIO  # band level (as measured) above this: coloured, capped
-                np.minimum(np.where(self._r_gate > white, cap, np.inf), self._r, out=self._r)
+                white *= COLOURED_RATIO  # band level above this: coloured, capped
+                capped[self._r > white] = cap
+                np.minimum(capped, self._r, out=self._r)
                 np.maximum(self._r, self._floor, out=self._r)
+            np.copyto(self._r_eff, self._r)
+            pg = self._pgain
+            if pg is not None and pg.ready and not vel:
+                # the movement's own band, measured: the gain depends on psd / r^2 only, so
+                # a joint whose practice-band jerk has the spectral density s_j is filtered
+                # as the library's psd would filter r sqrt(psd / s_j) (a slow reach: s_j ~100 x
+                # below the library's 3e3); the belief r itself stays the noise as measured
+                r_eff = self._r_gate * np.sqrt(self.psd / np.maximum(pg.jerk_psd(), 1e-6 * self.psd))
+                np.minimum(capped, r_eff, out=self._r_eff)
+                np.maximum(self._r_eff, self._floor, out=self._r_eff)
             self._armed = moved = True
             self._applied[0] = True
         elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
@@ -600,7 +605,7 @@ class KalmanCA(StateEstimator):
         if g is not None and len(g.k) == 3 * m and abs(g.dt - dt) <= 1e-3 * dt:
             k = np.array(g.k).reshape(3, m)  # the gain in use: no Riccati solve on a node thread
         else:
-            r = float(self._r.max())
+            r = float(self._r_eff.max())
             k, _ = steady_state(dt, r, float(self._rv.max()) if velocity_given else None, self.psd)
         d = ca_model.qdd_lag(dt, k, velocity_given)
         return {"q": 0.0, "qd": 0.0, "qdd": max(0.0, d - self.delay_s)}
