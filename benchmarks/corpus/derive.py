@@ -211,11 +211,12 @@ class Subject:
 
 
 def derive_ue_adl(repo: Path, subjects: list[str], tasks: str, sides: str, reps: str) -> tuple[dict, list]:
+    refused = [s for s in subjects if s in FORBIDDEN]
+    if refused:
+        raise SystemExit(f"{', '.join(refused)}: held out by the reviewer, never used")
     commit = git_head(repo)
     arrays, manifest = {}, []
     for subj in subjects:
-        if subj in FORBIDDEN:
-            raise SystemExit(f"{subj} is held out by the reviewer: never used")
         _, static = read_vicon_csv(git_text(repo, f"{subj}/{subj}_static.csv"))
         names = set(git_list(repo, subj))
         for side in sides:

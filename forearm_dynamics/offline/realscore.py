@@ -8,8 +8,8 @@ artefact. Used by benchmarks/real_corpus.py (issue 29) and anyone tuning an esti
 the corpus's tuning half:
 
 - `node_outputs`: the estimator's update() calls as torque_node makes them, each output
-  stamped with the sample it estimates (`stamp_ns`: an earlier one with a delay), only
-  warm outputs (the node publishes nothing before);
+  stamped with the sample it estimates (`stamp_ns`: an earlier one with a delay), the
+  warm-up outputs included (the node publishes them);
 - `score`: per DOF, NRMSE = RMSE / peak-to-peak of the reference torque over the whole
   recording, after the settling time (`SETTLE_S`), and apart the first second (a start
   from rest, or mid-movement, is its own line, never hidden in the mean);
@@ -43,24 +43,28 @@ class Outputs:
     q: np.ndarray  # (M, n)
     qd: np.ndarray
     qdd: np.ndarray
+    warm: np.ndarray  # (M,) bool: False for the warm-up outputs (published all the same)
 
 
 def node_outputs(stamps_ns: np.ndarray, q: np.ndarray, estimator: str,
                  settings: dict | None = None) -> Outputs:
     """The node's outputs for one uninterrupted stream (positions only): update() per
-    sample; an output at `est.stamp_ns` whenever the estimator is warm (a delay_s
-    estimator outputs the sample delay_s back; the last delay_s are never output, as in
-    the node, which has no drain at the end of a stream)."""
+    sample; an output at `est.stamp_ns` whenever there is one (stream_node publishes the
+    warm-up outputs too, counting them; a delay_s estimator outputs the sample delay_s
+    back, nothing before; the last delay_s are never output, as in the node, which has no
+    drain at the end of a stream)."""
     est = make_estimator(estimator, q.shape[1], settings or {})
-    st, qs, qds, qdds = [], [], [], []
+    st, qs, qds, qdds, ws = [], [], [], [], []
     for k in range(len(stamps_ns)):
         warm = est.update(int(stamps_ns[k]), q[k], None)
-        if warm and est.stamp_ns is not None:
+        if est.stamp_ns is not None:
             st.append(est.stamp_ns)
             qs.append(est.q.copy())
             qds.append(est.qd.copy())
             qdds.append(est.qdd.copy())
-    return Outputs(np.asarray(st, np.int64), np.array(qs), np.array(qds), np.array(qdds))
+            ws.append(bool(warm))
+    return Outputs(np.asarray(st, np.int64), np.array(qs), np.array(qds), np.array(qdds),
+                   np.asarray(ws, bool))
 
 
 def practice(stamps_ns: np.ndarray, q: np.ndarray, cutoff_hz: float | None = None
