@@ -97,8 +97,8 @@ def test_a_slow_movement_does_not_get_the_library_bandwidth() -> None:
     def bandwidth_hz(r: float) -> float:  # the filter's bandwidth at its noise belief
         return (psd / (r * r * dt)) ** (1 / 6) / (2 * math.pi)
 
-    b_slow = bandwidth_hz(float(est.noise_per_joint()[0]))
-    b_lib = bandwidth_hz(float(est_lib.noise_per_joint()[0]))
+    b_slow = bandwidth_hz(float(est.gain_noise_per_joint()[0]))
+    b_lib = bandwidth_hz(float(est_lib.gain_noise_per_joint()[0]))
     assert est._pgain.jerk_psd()[0] < 0.01 * psd  # measured: the movement's own jerk level
     assert b_slow < 0.6 * b_lib, (b_slow, b_lib)
     assert rms(kal[late, 0] - ref[late]) <= 0.5 * rms(lib[late, 0] - ref[late])

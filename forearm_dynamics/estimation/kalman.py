@@ -92,7 +92,10 @@ BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
 MAX_DELAY_S = 0.2
 EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
-COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
+COLOURED_RATIO = 1.5
+#: the measured jerk level may narrow a joint's filter by at most this factor on its noise
+#: (bandwidth x R_EFF_MAX^(-1/3)): a slow movement that speeds up, or a gap, is followed
+R_EFF_MAX = 4.0  # band level / white level above which the noise counts as coloured
 # the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
 # a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
 WHITE_ARM_EVALUATIONS = 25
@@ -172,6 +175,7 @@ class KalmanCA(StateEstimator):
         self._r = np.full(n, self._fixed_r or math.radians(0.5))
         self._r_gate = self._r.copy()
         self._r_eff = self._r.copy()  # the noise the gains are computed with (psd / r_eff^2)
+        self._rscale2 = np.ones(n)  # (r / r_eff)^2 per joint
         self._wmin = 2.0 * math.pi * v["kalman_min_bandwidth_hz"]
         self._rv = np.full(n, self._fixed_rv or math.radians(1.0))
         self._X = np.zeros((3, n))
@@ -224,6 +228,11 @@ class KalmanCA(StateEstimator):
     def noise_per_joint(self) -> np.ndarray:
         """The position noise std each joint believes (rad), (n,) copy."""
         return self._r.copy()
+
+    def gain_noise_per_joint(self) -> np.ndarray:
+        """The noise each joint's gain is computed with (rad), (n,) copy: the belief times
+        sqrt(kalman_jerk_psd / the joint's measured jerk density) (practice_gain.py), capped."""
+        return self._r_eff.copy()
 
     def noise(self) -> float | None:
         """One summary of the believed position noise (rad): the median over the joints
@@ -297,7 +306,7 @@ class KalmanCA(StateEstimator):
         out = np.zeros((self.n, 3, 3))
         for g in self._groups:
             if g.P is not None:
-                out[g.idx] = ca_model.to_matrix(g.P)
+                out[g.idx] = ca_model.to_matrix(g.P) * self._rscale2[g.idx, None, None]
         return out
 
     # -- state ----------------------------------------------------------------------------
@@ -401,6 +410,7 @@ class KalmanCA(StateEstimator):
                 np.take(kg[3:], gi, axis=1, out=self._Kv)
             sig = self._sig  # innovation std per joint, with the noise as measured
             np.take(sg, gi, out=sig)
+            sig *= self._rscale2
             np.multiply(self._r_gate, self._r_gate, out=self._tmp)
             sig += self._tmp
             np.sqrt(sig, out=sig)
@@ -562,8 +572,15 @@ class KalmanCA(StateEstimator):
                 # as the library's psd would filter r sqrt(psd / s_j) (a slow reach: s_j ~100 x
                 # below the library's 3e3); the belief r itself stays the noise as measured
                 r_eff = self._r_gate * np.sqrt(self.psd / np.maximum(pg.jerk_psd(), 1e-6 * self.psd))
+                np.minimum(r_eff, R_EFF_MAX * self._r_gate, out=r_eff)
                 np.minimum(capped, r_eff, out=self._r_eff)
                 np.maximum(self._r_eff, self._floor, out=self._r_eff)
+            # the innovations' prior variance: the groups' (at psd, r_eff) scaled to the joint's
+            # own (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2)
+            np.divide(self._r_gate, self._r_eff, out=self._rscale2)
+            self._rscale2 *= self._rscale2
+            for g in self._groups:
+                g.still = False  # the innovation stds again at the next step
             self._armed = moved = True
             self._applied[0] = True
         elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
