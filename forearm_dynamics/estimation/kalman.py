@@ -149,10 +149,11 @@ class KalmanCA(StateEstimator):
         SettingSpec("kalman_noise_floor_deg", 0.01, "deg",
                     "lowest noise the online estimate may believe (and the velocity floor in deg/s)",
                     lo=1e-6, hi=90.0),
-        SettingSpec("kalman_min_bandwidth_hz", 7.0, "Hz",
-                    "causal, positions only, coloured noise: never smooth below this band (keeps "
-                    "what the offline 6 Hz practice keeps): the belief is capped where the "
-                    "filter's bandwidth reaches it; 0 = off", lo=0.0, hi=1000.0),
+        SettingSpec("kalman_min_bandwidth_hz", 0.0, "Hz",
+                    "causal, positions only, coloured noise: never smooth below this band: the "
+                    "belief is capped where the filter's bandwidth reaches it; 0 = off (the "
+                    "default since issue 29: coloured content above 6 Hz is what the practice "
+                    "removes, so it is smoothed like noise)", lo=0.0, hi=1000.0),
         SettingSpec("practice_band_hz", 6.0, "Hz",
                     "causal, positions only: scale each joint's qd and qdd by their online "
                     "least-squares gain on the offline practice's (zero-phase low-pass at this "
