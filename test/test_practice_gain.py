@@ -65,7 +65,7 @@ def test_coloured_content_above_the_band_is_smoothed_like_the_practice() -> None
     q = (move + coloured + math.radians(0.005) * rng.standard_normal(n))[:, None]
     ref = practice_qdd(q)[:, 0]
     late = slice(int(SETTLE_S * RATE), None)
-    kal, est = stream(q, "kalman", {})
+    kal, _ = stream(q, "kalman", {})
     plain, _ = stream(q, "kalman", {"practice_band_hz": 0.0})
     bw, _ = stream(q, "butterworth", {"butterworth_cutoff_hz": 6.0})
     e_k = rms(kal[late, 0] - ref[late])

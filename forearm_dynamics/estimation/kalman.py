@@ -35,6 +35,12 @@ benchmarks/estimation_zoo.py, whose committed output states the default's number
 delay (delay_s > 0) the cap is off: the smoother sees each sample from both sides, as the
 practice does (mocap IK 100 Hz, delay 50 ms: 1.27 / 1.04 x the offline floor uncapped,
 1.43 / 1.62 x capped at 8 Hz).
+Since issue 29 the cap is off by default (kalman_min_bandwidth_hz 0): on raw recordings
+of real arm movements (benchmarks/real_corpus.py, tuning half) coloured content above 6 Hz
+is what the practice removes, so it is smoothed like noise; and, causal with positions
+only, each joint's gain is computed with its measured jerk density (r_eff = r sqrt(psd /
+s_j), at most 4 r) and its q̇, q̈ are scaled by their online regression gain on the
+practice's (practice_gain.py; estimator.practice_band_hz, 0 = off); docs/estimation.md.
 White noise (band and white levels alike: a camera, a
 glove, an encoder) is noise at every frequency and is smoothed as strongly as it says.
 The jump

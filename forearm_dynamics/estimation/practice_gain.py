@@ -27,8 +27,6 @@ Joints with no noise (held, exact input) are left at g = 1 by the filter.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 REF_DELAY_S = 0.2
