@@ -27,6 +27,8 @@ Joints with no noise (held, exact input) are left at g = 1 by the filter.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 REF_DELAY_S = 0.2
@@ -39,6 +41,12 @@ PRIOR_EVALS = 50.0
 
 
 def practice_kernels(dt: float, cutoff_hz: float, half_s: float) -> np.ndarray:
+    """A read-only copy of the cached kernels (_kernels: built once per rate and process)."""
+    return _kernels(round(dt, 12), cutoff_hz, half_s)
+
+
+@functools.lru_cache(maxsize=16)
+def _kernels(dt: float, cutoff_hz: float, half_s: float) -> np.ndarray:
     """(k1, k2): weights over 2 h + 1 samples (oldest first, h = round(half_s / dt)) that
     give the practice's q̇ and q̈ at the middle sample: the response of the zero-phase
     filter (filtering.lowpass: forward-backward Butterworth) to an impulse, differentiated
@@ -70,6 +78,7 @@ def practice_kernels(dt: float, cutoff_hz: float, half_s: float) -> np.ndarray:
     a = v.T @ (win[:, None] * v)
     for p in range(4):
         k[p] += win * (v @ np.linalg.solve(a, target[p] - v.T @ k[p]))
+    k.setflags(write=False)
     return k
 
 
