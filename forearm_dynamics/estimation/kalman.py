@@ -415,12 +415,17 @@ class KalmanCA(StateEstimator):
             np.take(kg[:3], gi, axis=1, out=self._Kp)
             if vel:
                 np.take(kg[3:], gi, axis=1, out=self._Kv)
-            sig = self._sig  # innovation std per joint, with the noise as measured
-            np.take(sg, gi, out=sig)
-            sig *= self._rscale2
-            np.multiply(self._r_gate, self._r_gate, out=self._tmp)
-            sig += self._tmp
-            np.sqrt(sig, out=sig)
+            self._innovation_std()
+
+    def _innovation_std(self) -> None:
+        """Per joint innovation std with the noise as measured: the group's prior variance
+        scaled to the joint's own ((r / r_eff)^2) plus r^2."""
+        sig = self._sig
+        np.take(self._Sg, self._gidx, out=sig)
+        sig *= self._rscale2
+        np.multiply(self._r_gate, self._r_gate, out=self._tmp)
+        sig += self._tmp
+        np.sqrt(sig, out=sig)
 
     # -- update ---------------------------------------------------------------------------
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
@@ -586,8 +591,7 @@ class KalmanCA(StateEstimator):
             # own (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2)
             np.divide(self._r_gate, self._r_eff, out=self._rscale2)
             self._rscale2 *= self._rscale2
-            for g in self._groups:
-                g.still = False  # the innovation stds again at the next step
+            self._innovation_std()  # not the groups' recursions: they are converged (still)
             self._armed = moved = True
             self._applied[0] = True
         elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
@@ -609,7 +613,7 @@ class KalmanCA(StateEstimator):
         pg = self._pgain
         if pg is not None and not vel and ne.period_s > 0.0:
             pg.configure(ne.period_s)  # kernels once per rate
-            np.copyto(self._gain, pg.gain)
+            np.copyto(self._gain, pg.update_gain())
             if ne.white_evaluations:  # exact or held joints (no white level at all, even with
                 # a fixed noise belief): their q̈ is the input's own, gain 1. Not the gate's
                 # 2 x floor: a real marker elbow reads 0.017 deg there (UE-ADL) and is exactly

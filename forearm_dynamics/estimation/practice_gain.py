@@ -92,7 +92,7 @@ class PracticeGain:
         self._sxy = np.zeros((2, n))
         self._sxx = np.zeros((2, n))
         self._tmp = np.zeros((4, n))
-        self.ms_res = np.zeros(n)  # mean square of what the practice removes (rad^2)
+        self._t4 = np.zeros((4, n))
         self.ms_jerk = np.zeros(n)  # mean square of the practice's jerk ((rad/s^3)^2)
         self._k: np.ndarray | None = None
         self._dt = 0.0
@@ -108,7 +108,7 @@ class PracticeGain:
             return
         self._k = practice_kernels(dt, self.cutoff_hz, REF_DELAY_S)  # (4, 2h + 1)
         self._h = h = (self._k.shape[1] - 1) // 2
-        self._q = np.zeros((2 * h + 1, self.n))
+        self._q = np.zeros((2 * (2 * h + 1), self.n))
         self._x = np.zeros((h + 1, 2, self.n))
         self._dt = dt
         self._every = max(1, round(EVERY_S / dt))
@@ -127,28 +127,42 @@ class PracticeGain:
         h = self._h
         c = self._count
         w = 2 * h + 1
-        self._q[c % w] = q
+        j = c % w
+        self._q[j] = q  # twice: the window is always one contiguous slice
+        self._q[j + w] = q
         xs = self._x[c % (h + 1)]
         xs[0] = qd
         xs[1] = qdd
         self._count = c = c + 1
         if c < w or c % self._every:
             return
-        start = c % w  # oldest sample in the ring
-        k = self._k
-        if start:
-            k = np.roll(k, start, axis=1)  # the ring's order
+        start = c % w  # oldest sample of the window
         ref = self._tmp
-        np.dot(k, self._q, out=ref)  # the practice's (q, qd, qdd, jerk) of the middle sample
+        np.dot(self._k, self._q[start:start + w], out=ref)  # the practice's (q, qd, qdd, jerk)
         x = self._x[c % (h + 1)]  # the causal estimate of that sample (h samples back)
         self._evals += 1
         a = max(self._alpha, 1.0 / self._evals)
-        res = self._q[(c - 1 - h) % w] - ref[0]
-        self.ms_res += a * (res * res - self.ms_res)
-        self.ms_jerk += a * (ref[3] * ref[3] - self.ms_jerk)
-        ref = ref[1:3]
-        self._sxy += a * (ref * x - self._sxy)
-        self._sxx += a * (x * x - self._sxx)
+        t = self._t4
+        np.multiply(ref[3], ref[3], out=t[3])
+        np.multiply(ref[1:3], x, out=t[:2])
+        t[:2] -= self._sxy
+        t[3] -= self.ms_jerk
+        t *= a
+        self._sxy += t[:2]
+        self.ms_jerk += t[3]
+        np.multiply(x, x, out=t[:2])
+        t[:2] -= self._sxx
+        t[:2] *= a
+        self._sxx += t[:2]
+
+    @property
+    def ready(self) -> bool:
+        return self._evals >= self._min
+
+    def update_gain(self) -> np.ndarray:
+        """The gains from the sums so far (the filter asks at its noise updates, every
+        0.25 s: not per sample): clip(Sxy / Sxx, 0, 1) blended with PRIOR_GAIN, weight
+        PRIOR_EVALS evaluations against the ones averaged; 1 before MIN_S."""
         if self._evals >= self._min:
             np.divide(self._sxy, np.maximum(self._sxx, 1e-300), out=self.gain)
             if PRIOR_EVALS:
@@ -156,14 +170,7 @@ class PracticeGain:
                 self.gain *= m / (m + PRIOR_EVALS)
                 self.gain += PRIOR_GAIN * PRIOR_EVALS / (m + PRIOR_EVALS)
             np.clip(self.gain, 0.0, GAIN_MAX, out=self.gain)
-
-    @property
-    def ready(self) -> bool:
-        return self._evals >= self._min
-
-    def removed(self) -> np.ndarray:
-        """Per joint RMS of what the practice removes (rad): everything above its band."""
-        return np.sqrt(self.ms_res)
+        return self.gain
 
     def jerk_psd(self) -> np.ndarray:
         """Per joint white-jerk spectral density (rad^2/s^5) with the practice's jerk power
