@@ -221,6 +221,7 @@ class KalmanCA(StateEstimator):
         band = v["practice_band_hz"]
         self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
         self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
+        self._pg_residual = np.zeros((2, n))
         self.reset()
 
     # -- public state ---------------------------------------------------------------------
@@ -235,6 +236,14 @@ class KalmanCA(StateEstimator):
     def noise_per_joint(self) -> np.ndarray:
         """The position noise std each joint believes (rad), (n,) copy."""
         return self._r.copy()
+
+    def output_gain(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """With the practice gain on (causal, positions only): ((2, n) the gains applied to
+        (qd, qdd), (2, n) the mean square error of the scaled (qd, qdd) against the practice
+        as measured, 0 on exact joints); else None."""
+        if self._pgain is None or self._vel:
+            return None
+        return self._gain.copy(), self._pg_residual.copy()
 
     def gain_noise_per_joint(self) -> np.ndarray:
         """The noise each joint's gain is computed with (rad), (n,) copy: the belief times
@@ -614,11 +623,14 @@ class KalmanCA(StateEstimator):
         if pg is not None and not vel and ne.period_s > 0.0:
             pg.configure(ne.period_s)  # kernels once per rate
             np.copyto(self._gain, pg.update_gain())
+            self._pg_residual = pg.residual(pg.gain)
             if ne.white_evaluations:  # exact or held joints (no white level at all, even with
                 # a fixed noise belief): their q̈ is the input's own, gain 1. Not the gate's
                 # 2 x floor: a real marker elbow reads 0.017 deg there (UE-ADL) and is exactly
                 # the joint whose coloured content above 6 Hz must be calibrated away
-                self._gain[:, ne.white(self._tmp) <= EXACT_WHITE * self._floor] = 1.0
+                exact = ne.white(self._tmp) <= EXACT_WHITE * self._floor
+                self._gain[:, exact] = 1.0
+                self._pg_residual[:, exact] = 0.0
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""

@@ -91,6 +91,7 @@ class PracticeGain:
         self.gain = np.ones((2, n))  # applied to (qd, qdd)
         self._sxy = np.zeros((2, n))
         self._sxx = np.zeros((2, n))
+        self._syy = np.zeros((2, n))  # mean square of the practice's (qd, qdd)
         self._tmp = np.zeros((4, n))
         self._t4 = np.zeros((4, n))
         self.ms_jerk = np.zeros(n)  # mean square of the practice's jerk ((rad/s^3)^2)
@@ -154,6 +155,10 @@ class PracticeGain:
         t[:2] -= self._sxx
         t[:2] *= a
         self._sxx += t[:2]
+        np.multiply(ref[1:3], ref[1:3], out=t[:2])
+        t[:2] -= self._syy
+        t[:2] *= a
+        self._syy += t[:2]
 
     @property
     def ready(self) -> bool:
@@ -171,6 +176,12 @@ class PracticeGain:
                 self.gain += PRIOR_GAIN * PRIOR_EVALS / (m + PRIOR_EVALS)
             np.clip(self.gain, 0.0, GAIN_MAX, out=self.gain)
         return self.gain
+
+    def residual(self, gain: np.ndarray) -> np.ndarray:
+        """(2, n) mean square of (practice - gain x) for (qd, qdd): the scaled estimate's
+        error against the practice as measured (noise, lag and what the shrink leaves), for
+        the σ (uncertainty/state_source.py)."""
+        return np.maximum(self._syy - 2.0 * gain * self._sxy + gain * gain * self._sxx, 0.0)
 
     def jerk_psd(self) -> np.ndarray:
         """Per joint white-jerk spectral density (rad^2/s^5) with the practice's jerk power
