@@ -224,11 +224,20 @@ def _coverage(arm, every, **kw):
 @pytest.mark.slow  # the heaviest unit-module test (~15 s at load 12): not in `-m unit`
 def test_calibrated_sigma_covers_and_the_uncalibrated_ones_do_not(arm):
     """On 9 movements at 100 Hz, 0.5 deg: the calibrated σ covers 90-98 % and is 0.8-1.5x
-    the RMSE; the noise covariance alone (no lag part) covers < 90 %, the raw filter P
-    without the lag part is > 1.5x too wide (benchmarks/uncertainty.py: the full runs)."""
+    the RMSE; the noise covariance alone (no lag part) covers < 90 %; the raw filter P
+    without the lag part is > 1.2x too wide (benchmarks/uncertainty.py: the full runs).
+    The last is a property of the filter's own P and of the filter without issue 29's
+    practice gain (practice_band_hz 0, set here): with it (the default) the measured jerk
+    level narrows the filter and its P with it (rescaled to the joint's own noise), and the
+    output is shrunk, a bias P does not contain, so the raw P is too narrow instead: it
+    neither covers (< 90 %) nor reaches 0.8x the RMSE, the same bounds as the no-lag σ
+    (measured 0.870 / 0.786; 0.973 / 1.218 without the gain)."""
     cov, ratio = _coverage(arm, 8)
     assert 0.90 <= cov <= 0.98 and 0.8 <= ratio <= 1.5, (cov, ratio)
     cov_nolag, ratio_nolag = _coverage(arm, 8, lag=False)
     assert cov_nolag < 0.90 and ratio_nolag < 0.8, (cov_nolag, ratio_nolag)
-    _cov_p, ratio_p = _coverage(arm, 8, lag=False, covariance="posterior")
+    _cov_p, ratio_p = _coverage(arm, 8, lag=False, covariance="posterior",
+                                settings={"practice_band_hz": 0.0})
     assert ratio_p > 1.2, ratio_p
+    cov_p, ratio_p = _coverage(arm, 8, lag=False, covariance="posterior")
+    assert cov_p < 0.90 and ratio_p < 0.8, (cov_p, ratio_p)

@@ -262,6 +262,17 @@ class KalmanCA(StateEstimator):
             return None
         return self._gain.copy(), self._pg_residual.copy()
 
+    def shrink_removed(self) -> np.ndarray | None:
+        """With the practice gain on (causal, positions only): (2, n) what the gains took from
+        the last output's (qd, qdd), (1 - g) x with x the filter's own estimate; else None.
+        The σ propagates it through the derivatives as one vector (uncertainty/torque_std.py):
+        it is the same movement shrunk on every joint at once, not independent noise."""
+        if self._pgain is None or self._vel:
+            return None
+        out = 1.0 - self._gain
+        out *= self._X[1:]
+        return out
+
     def gain_noise_per_joint(self) -> np.ndarray:
         """The noise each joint's gain is computed with (rad), (n,) copy: the belief times
         sqrt(kalman_jerk_psd / the joint's measured jerk density) (practice_gain.py), capped."""
