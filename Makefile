@@ -8,7 +8,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export HOME ?= /tmp
 EXTRAS ?= test,reference,plots
 
-.PHONY: setup browser test test-unit test-hosts demo demo-closed-loop lint bench bench-estimation bench-rate soak reference reproduce clean
+.PHONY: setup browser test test-unit test-hosts test-ros-tools demo demo-closed-loop lint bench bench-estimation bench-rate soak reference muscle-reference reproduce clean
 
 setup: $(VENV)/.installed browser
 
@@ -30,12 +30,24 @@ $(VENV)/.installed: setup.py setup.cfg .ci/requirements.lock
 
 test: setup
 	$(VENV)/bin/ruff check .
-	ROS_DOMAIN_ID=71 $(PY) -m pytest -q -m "not hosts" test
+	ROS_DOMAIN_ID=71 $(PY) -m pytest -q -m "not hosts and not ros_tools" test
 
 # Two hosts on one machine (network namespaces + a veth pair; root: CI runs as root).
 # Installs nftables (apt) when a loss test needs it. docs/two-hosts.md
 test-hosts: setup
 	ROS_DOMAIN_ID=71 $(PY) -m pytest -q -m hosts test
+
+# The package under the upstream ROS 2 tools (docs/testing.md): colcon build, ros2 launch of
+# every launch file, ros2 lifecycle. Needs the installer of the upstream ros2 CLI, which is
+# not on PyPI: make test-ros-tools ROS2CLI_INSTALL=<path to its install.sh> (CI passes it).
+# It builds a venv of its own (ROS2CLI_VENV, kept for the next run; ~3-15 min to build).
+ROS2CLI_INSTALL ?=
+ROS2CLI_VENV ?= build/ros2cli-venv
+test-ros-tools:
+	@test -n "$(ROS2CLI_INSTALL)" || { echo "make test-ros-tools: give ROS2CLI_INSTALL=<the ros2 CLI's install.sh>" >&2; exit 2; }
+	@if test -x $(ROS2CLI_VENV)/bin/ros2; then $(ROS2CLI_VENV)/bin/pip install -q --disable-pip-version-check --no-deps -e .; \
+	  else $(ROS2CLI_INSTALL) $(ROS2CLI_VENV); fi
+	ROS_DOMAIN_ID=76 $(ROS2CLI_VENV)/bin/python -m pytest -q -m ros_tools test/test_ros_tools.py
 
 # the fast tier (docs/testing.md): no processes, no DDS; run it on every change
 test-unit: setup
@@ -50,9 +62,11 @@ demo: setup
 # The virtual arm in closed loop (docs/virtual-arm.md): trajectory_publisher + torque_node +
 # arm_sim + a computed-torque controller; prints the tracking error, draws
 # demo_out/closed_loop/closed_loop.png. CLOSED_LOOP_ARGS="--lockstep" runs it on arm_sim's clock.
+# ROS_DOMAIN_ID as for make demo (unset or 0: 74; held, moved on if another run holds it).
 CLOSED_LOOP_ARGS ?=
+CLOSED_LOOP_DOMAIN = $(if $(filter-out 0,$(ROS_DOMAIN_ID)),$(ROS_DOMAIN_ID),74)
 demo-closed-loop: setup
-	$(PY) examples/closed_loop.py --movements 1,26,51 --domain 74 --out demo_out/closed_loop --plot $(CLOSED_LOOP_ARGS)
+	$(PY) examples/closed_loop.py --movements 1,26,51 --domain $(CLOSED_LOOP_DOMAIN) --out demo_out/closed_loop --plot $(CLOSED_LOOP_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check .
@@ -84,6 +98,13 @@ clean:
 
 reference: setup
 	$(VENV)/bin/make_reference
+
+# OpenSim's StaticOptimization of 13 library movements with the shipped muscles, and the
+# exact-geometry solve (MuJoCo, the muscles-fit extra): the cached muscle reference the tests
+# and benchmarks/muscle_node.py compare with (~10-25 min on 2 cores). docs/muscles.md
+muscle-reference: setup
+	$(PY) -m pip install -q --disable-pip-version-check -e ".[muscles-fit]"
+	$(PY) -m forearm_dynamics.cli.make_muscle_reference
 
 reproduce: setup
 	$(VENV)/bin/reproduce_paper --out results/paper --docs docs/paper.md --blocks docs/paper-discussion.md

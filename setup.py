@@ -14,6 +14,7 @@ EXECUTABLES = {
     "check_bag": "forearm_dynamics.cli.check_bag:main",
     "demo": "forearm_dynamics.cli.demo:main",
     "torque_node": "forearm_dynamics.nodes.torque_node:main",
+    "torque_lifecycle_node": "forearm_dynamics.nodes.lifecycle:main",
     "arm_sim": "forearm_dynamics.nodes.arm_sim:main",
     "trajectory_publisher": "forearm_dynamics.nodes.trajectory_publisher:main",
     "bag_recorder": "forearm_dynamics.nodes.bag_recorder:main",
@@ -24,6 +25,8 @@ EXECUTABLES = {
     "bag_export": "forearm_dynamics.cli.bag_export:main",
     "arm_viz": "forearm_dynamics.nodes.arm_viz:main",
     "bag_viz": "forearm_dynamics.cli.bag_viz:main",
+    "muscle_node": "forearm_dynamics.nodes.muscle_node:main",
+    "bag_muscles": "forearm_dynamics.cli.bag_muscles:main",
 }
 
 setup(
@@ -35,6 +38,8 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml") + glob("config/*.json")),
         (f"share/{PACKAGE}/config/nodes", glob("config/nodes/*.yaml")),  # node parameters
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),  # ros2 launch (docs/ros.md)
+        (f"share/{PACKAGE}/examples", ["examples/closed_loop.py"]),  # closed_loop.launch.py runs it
     ],
     package_data={PACKAGE: ["data/*"]},
     python_requires=">=3.10",
@@ -58,10 +63,13 @@ setup(
         # check_bag --html: its offline JavaScript bundle makes the report one file that opens
         # without a network; pure Python (+ narwhals, packaging), so required, not an extra
         "plotly>=6",
+        "daqp>=0.7",  # muscles/static_opt.py: the QP of the static optimisation (MIT)
     ],
     extras_require={
         "plots": ["matplotlib>=3.7"],
         "reference": ["opensim==4.6"],
+        # python -m forearm_dynamics.muscles.fit: re-derives the shipped muscle model
+        "muscles-fit": ["mujoco==3.17.0", "myo-sim==0.2.4"],
         "test": ["pytest>=8", "hypothesis>=6.100", "rosbags>=0.10", "ruff>=0.5",
                  "colcon-common-extensions", "colcon-ros"],
     },

@@ -221,6 +221,7 @@ def measure_switch(domain: int, work: Path, seconds: float) -> dict:
 
     rng = np.random.default_rng(7)
     q0, v0, acc = rng.uniform(-0.3, 0.3, 20), rng.uniform(-0.5, 0.5, 20), rng.uniform(-2, 2, 20)
+    v0, acc = v0 / 5, acc / 20  # an arm's motion: far-out angles are refused as units (issue 30)
 
     def state(t_s: float):
         return q0 + v0 * t_s + 0.5 * acc * t_s * t_s, v0 + acc * t_s

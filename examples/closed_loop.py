@@ -45,6 +45,10 @@ that applied it (a round trip controller -> arm_sim -> controller), and in real 
 reference stamp -> feed-forward received (trajectory_publisher -> torque_node -> here).
 Exit code 0 when it ran (whatever the error: the caller judges it), 2 when it could not.
 --no-feedforward runs PD only (for comparison).
+--attach: start no node (closed_loop.launch.py starts them: `ros2 launch forearm_dynamics
+closed_loop.launch.py`): wait for arm_sim and torque_node, print "closed_loop: ready" (the
+launch file starts trajectory_publisher on that line), and end once the reference has
+been silent for ATTACH_END_S.
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import rclpy
+from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
@@ -68,9 +73,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from forearm_dynamics import JOINT_NAMES, build_model, get_movement
+from forearm_dynamics.nodes.common import hold_stop_signals
 from forearm_dynamics.processes import Child, claim_domain, ros_env
 
 GAP_S = 0.3
+ATTACH_END_S = 2.0  # --attach: the reference silent this long (gaps are GAP_S) = the end
 WAIT_S = 0.05  # lockstep: the longest wait for a reference before stepping without it
 #: PD bandwidth (rad/s): 5 Hz in lockstep (the loop delay is one step, always), 2 Hz in
 #: real time (arm_sim stalls on a loaded machine are tens of ms of loop delay)
@@ -261,6 +268,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plot", action="store_true", help="draw reference vs simulated angles")
     ap.add_argument("--domain", type=int, default=91)
     ap.add_argument("--no-feedforward", action="store_true", help="PD only, for comparison")
+    ap.add_argument("--attach", action="store_true",
+                    help="start no node: run beside closed_loop.launch.py's nodes")
     ap.add_argument("--lockstep", action="store_true",
                     help="arm_sim in lockstep: one step per reference sample (load-independent)")
     args = ap.parse_args(argv)
@@ -270,16 +279,19 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"closed_loop: {exc}", file=sys.stderr)
         return 2
-    lease = claim_domain(args.domain, "closed_loop")
     out = args.out or Path(tempfile.mkdtemp(prefix="closed_loop_"))
     (out / "logs").mkdir(parents=True, exist_ok=True)
-    env = ros_env(lease.domain, out / "logs")
+    if args.attach:  # the launch file's nodes, in the caller's ROS environment
+        env = dict(os.environ)
+    else:
+        lease = claim_domain(args.domain, "closed_loop")
+        env = ros_env(lease.domain, out / "logs")
     start = movements[0].start
     posture = [a for n, x in zip(JOINT_NAMES, start, strict=True)
                for a in ("-p", f"initial_posture.{n}:={float(x)!r}")]
     # lockstep: arm_sim's /clock is everyone's time (trajectory_publisher's timer ticks on it)
     sim_time = ["-p", "use_sim_time:=true"] if args.lockstep else []
-    children = [
+    children = [] if args.attach else [
         Child.script("arm_sim", [*posture, "-p", "command_timeout:=0.5",
                                  "-p", f"lockstep:={'true' if args.lockstep else 'false'}"],
                      env, out / "logs"),
@@ -289,6 +301,8 @@ def main(argv: list[str] | None = None) -> int:
                      env, out / "logs"),
     ]
     os.environ.update({k: v for k, v in env.items() if k.startswith("ROS_")})
+    if args.attach:  # under ros2 launch: SIGINT (maybe twice) ends the run, never a traceback
+        hold_stop_signals()
     rclpy.init()
     node = rclpy.create_node("closed_loop_controller")
     ctrl = Controller(node, build_model("segmented", 50), start, not args.no_feedforward,
@@ -297,21 +311,37 @@ def main(argv: list[str] | None = None) -> int:
     executor.add_node(node)
 
     def spin_for(seconds: float) -> None:
-        executor.spin_until_future_complete(Future(), timeout_sec=seconds)
+        try:
+            executor.spin_until_future_complete(Future(), timeout_sec=seconds)
+        except ExternalShutdownException:  # --attach: stopped by a signal (rclpy.ok() says so)
+            pass
 
     try:
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and all(c.running() for c in children) and not (
+        while rclpy.ok() and time.monotonic() < deadline and all(c.running() for c in children) and not (
                 ctrl.pub.get_subscription_count() and ctrl.sim_t0_ns is not None
                 and (args.lockstep or len(ctrl.states) > 100)
                 and node.count_publishers("reference/joint_torques")):
             spin_for(0.05)
+        if not rclpy.ok():
+            print("closed_loop: stopped before the nodes came up", flush=True)
+            return 0
         if time.monotonic() >= deadline or not all(c.running() for c in children):
             dead = [c for c in children if not c.running()]
             why = f": {dead[0].text().strip().splitlines()[-1]}" if dead else ""
             print(f"closed_loop: arm_sim/torque_node did not come up{why}; logs in {out / 'logs'}",
                   file=sys.stderr)
             return 2
+        if args.attach:
+            print("closed_loop: ready", flush=True)
+            last = time.monotonic()
+            end = last + 60 + sum(m.duration + GAP_S for m in movements) * 3
+            seen = 0
+            while rclpy.ok() and time.monotonic() < min(end, last + (ATTACH_END_S if seen else 120)):
+                spin_for(0.1)
+                if len(ctrl.ff_ns) != seen:
+                    seen, last = len(ctrl.ff_ns), time.monotonic()
+            return report(ctrl, args, movements, out)
         pub = Child.script("trajectory_publisher", [
             "-p", f"movements:={ids}", "-p", "output_topic:=reference/joint_states",
             "-p", "start_delay:=0.5", "-p", f"gap:={GAP_S}", "-p", "min_subscribers:=1",
@@ -329,6 +359,11 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         for c in reversed(children):
             c.stop()
+    return report(ctrl, args, movements, out)
+
+
+def report(ctrl: Controller, args, movements, out: Path) -> int:
+    """Print and write the tracking error and latencies; 0 when every movement was tracked."""
     results = tracking(ctrl)
     mode = "PD only" if args.no_feedforward else "feed-forward (torque_node) + PD"
     print(f"closed loop, {mode}, arm_sim {'lockstep' if args.lockstep else '1 kHz real time'}; "

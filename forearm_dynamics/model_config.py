@@ -23,6 +23,7 @@ import numpy as np
 from .anthropometry import BodySize, resolve_body_size
 from .dynamics import ArmModel, build_model
 from .errors import ConfigMessageError
+from .shoulder import SHOULDER_CHOICES
 
 CONFIG_SCHEMA = 2
 DEFAULT_KIND = "segmented"
@@ -30,6 +31,8 @@ DEFAULT_SIZE = 50
 
 #: The model part (required, written by `model_config`) of a config message.
 MODEL_KEYS = frozenset({"schema", "model", "body_size", "side", "payload", "placement", "joint_names"})
+#: optional model keys: written only when the model has one (a shoulder: shoulder.py)
+OPTIONAL_MODEL_KEYS = frozenset({"shoulder"})
 #: The node part (optional: a bag writer may state only the model): who computed the torques
 #: and how. Each key a writer may add, with what it holds.
 NODE_FIELDS = {
@@ -136,6 +139,10 @@ def _build_kwargs(cfg: dict, size: BodySize) -> dict:
             kw["placement"] = placement["name"]
     _require(cfg["side"] in ("right", "left"), f"side {cfg['side']!r} is neither right nor left")
     kw["side"] = cfg["side"]
+    if "shoulder" in cfg:
+        _require(cfg["shoulder"] in SHOULDER_CHOICES, f"shoulder {cfg['shoulder']!r} is not one of "
+                 f"{SHOULDER_CHOICES}")
+        kw["shoulder"] = cfg["shoulder"]
     payload = cfg["payload"]
     if payload is not None:
         _keys(payload, PAYLOAD_KEYS, PAYLOAD_KEYS, "payload")
@@ -163,7 +170,7 @@ def model_from_config(cfg: dict | None) -> ModelChoice:
         return ModelChoice(build_model(DEFAULT_KIND, DEFAULT_SIZE), DEFAULT_SIZE, "default",
                            [(f"no torque_node/config in the bag: assuming the {DEFAULT_KIND} "
                              f"model at body size {DEFAULT_SIZE}")])
-    _keys(cfg, MODEL_KEYS | NODE_KEYS, MODEL_KEYS, "the message")
+    _keys(cfg, MODEL_KEYS | OPTIONAL_MODEL_KEYS | NODE_KEYS, MODEL_KEYS, "the message")
     _require(cfg["schema"] == CONFIG_SCHEMA,
              f"schema {cfg['schema']!r} (this forearm_dynamics reads schema {CONFIG_SCHEMA})")
     size, pct = _body_size(cfg["body_size"])
@@ -218,6 +225,8 @@ def model_config(arm: ArmModel) -> dict:
         "placement": _placement(arm),
         "joint_names": list(arm.joint_names),
     }
+    if getattr(arm, "shoulder", None) is not None:  # absent without one: configs as before
+        out["shoulder"] = arm.shoulder.name
     if any(isinstance(x, float) and not math.isfinite(x) for x in out["body_size"].values()):
         raise ValueError("body size scale factors are not finite")
     return out

@@ -12,7 +12,11 @@ from typing import Any
 
 import numpy as np
 
+from .shoulder import ShoulderConvention
 from .tree import KinematicTree, Link
+
+#: OpenSim coordinate names of a shoulder's chain joints (the engine's own; see OpenSimArm)
+CHAIN_NAMES = ("shoulder_chain_0", "shoulder_chain_1", "shoulder_chain_2")
 
 
 def opensim_available() -> bool:
@@ -45,8 +49,32 @@ def _vec3(osim: Any, v) -> Any:
     return osim.Vec3(x, y, z)
 
 
-def build_osim_model(tree: KinematicTree) -> Any:
-    """An osim.Model mirroring `tree`: one single-coordinate CustomJoint per tree joint."""
+def _custom_joint(osim: Any, name: str, coordinate: str, axis, parent: Any, origin, child: Any) -> Any:
+    """A one-coordinate CustomJoint: rotation about `axis` (parent frame) at `origin`."""
+    zero = osim.Vec3(0.0, 0.0, 0.0)
+    st = osim.SpatialTransform()
+    axes = (axis, *_orthonormal(np.asarray(axis, float)))
+    for k, ax in enumerate(axes):
+        rot = st.updTransformAxis(k)
+        rot.setAxis(_vec3(osim, ax))
+        if k == 0:
+            rot.setCoordinateNames(osim.ArrayStr(coordinate, 1))
+            # setFunction(osim.LinearFunction()) segfaults; set_function with a copy works.
+            rot.set_function(osim.LinearFunction(1.0, 0.0))
+        else:
+            rot.set_function(osim.Constant(0.0))
+    for k in range(3, 6):
+        st.updTransformAxis(k).set_function(osim.Constant(0.0))
+    return osim.CustomJoint(name, parent, _vec3(osim, origin), zero, child, zero, zero, st)
+
+
+def build_osim_model(tree: KinematicTree, shoulder: ShoulderConvention | None = None) -> Any:
+    """An osim.Model mirroring `tree`: one single-coordinate CustomJoint per tree joint.
+
+    shoulder: the humerus hangs from the ground by three one-coordinate CustomJoints in the
+    convention's chain (coordinates CHAIN_NAMES, two massless intermediate bodies) instead
+    of a weld.
+    """
     osim = _osim()
     model = osim.Model()
     model.setName(f"forearm_{tree.kind}_{tree.side}_{tree.body_size.label}")
@@ -59,7 +87,25 @@ def build_osim_model(tree: KinematicTree) -> Any:
 
     bodies = {tree.root.name: body(tree.root)}
     model.addBody(bodies[tree.root.name])
-    model.addJoint(osim.WeldJoint(f"{tree.root.name}_ground", model.getGround(), bodies[tree.root.name]))
+    if shoulder is None:
+        model.addJoint(osim.WeldJoint(f"{tree.root.name}_ground", model.getGround(), bodies[tree.root.name]))
+    else:
+        parent = model.getGround()
+        for k, axis in enumerate(shoulder.axes(tree.side)):
+            if k < 2:
+                child = osim.Body(f"shoulder_phantom_{k}", 0.0, osim.Vec3(0.0, 0.0, 0.0),
+                                  osim.Inertia(0.0, 0.0, 0.0))
+                model.addBody(child)
+            else:
+                child = bodies[tree.root.name]
+            cj = _custom_joint(osim, f"shoulder_{k}", CHAIN_NAMES[k], axis, parent, np.zeros(3), child)
+            model.addJoint(cj)
+            coord = cj.upd_coordinates(0)
+            coord.setRangeMin(-2 * np.pi)
+            coord.setRangeMax(2 * np.pi)
+            coord.setDefaultClamped(False)
+            coord.setDefaultLocked(False)
+            parent = child
     zero = osim.Vec3(0.0, 0.0, 0.0)
     for joint in tree.joints:
         child = bodies[joint.child] = body(tree.link(joint.child))
@@ -95,15 +141,21 @@ def build_osim_model(tree: KinematicTree) -> Any:
 
 
 class OpenSimArm:
-    """OpenSim inverse dynamics with the ArmModel interface (joint_names order, N·m)."""
+    """OpenSim inverse dynamics with the ArmModel interface (joint_names order, N·m).
 
-    def __init__(self, tree: KinematicTree):
+    With a shoulder: the same 23 inputs and outputs as ShoulderArmModel (the 20 joints,
+    then the convention's public coordinates); the engine's chain coordinates are
+    C @ public, its public generalized forces C.T @ chain forces.
+    """
+
+    def __init__(self, tree: KinematicTree, shoulder: ShoulderConvention | None = None):
         osim = _osim()
         self.tree = tree
         self.kind = tree.kind
-        self.joint_names: tuple[str, ...] = tree.joint_names
+        self.shoulder = shoulder
+        self.joint_names: tuple[str, ...] = tree.joint_names + (() if shoulder is None else CHAIN_NAMES)
         self.nv = len(self.joint_names)
-        self.model = build_osim_model(tree)
+        self.model = build_osim_model(tree, shoulder)
         self._state = self.model.initSystem()
         self._solver = osim.InverseDynamicsSolver(self.model)
         self._to_vector = osim.Vector.createFromMat
@@ -142,6 +194,10 @@ class OpenSimArm:
                              f"in joint_names order; got {q.shape}, {qd.shape}, {qdd.shape}")
         if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
             raise ValueError("inverse_dynamics got NaN or inf in the inputs")
+        if self.shoulder is not None:  # public shoulder coordinates -> the engine's chain
+            c = self.shoulder.C
+            q, qd, qdd = (np.concatenate([np.atleast_2d(x)[:, :20], np.atleast_2d(x)[:, 20:] @ c.T], axis=1)
+                          for x in (q, qd, qdd))
         order = self.internal_order
         # Permute once for the whole batch so each row is already in state order.
         qi, ui, ai = (np.ascontiguousarray(np.atleast_2d(x)[:, order]) for x in (q, qd, qdd))
@@ -154,6 +210,8 @@ class OpenSimArm:
             out[k] = solve(s, vec(ai[k])).to_numpy()
         tau = np.empty_like(out)
         tau[:, order] = out
+        if self.shoulder is not None:
+            tau[:, 20:] = tau[:, 20:] @ self.shoulder.C
         return tau[0] if single else tau
 
     def to_osim(self, path: str | Path) -> Path:
@@ -163,4 +221,4 @@ class OpenSimArm:
         return path
 
 
-__all__ = ["OpenSimArm", "build_osim_model", "opensim_available"]
+__all__ = ["CHAIN_NAMES", "OpenSimArm", "build_osim_model", "opensim_available"]

@@ -13,7 +13,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("HOME", "/tmp")
 
 #: The tiers a test is in (setup.cfg registers them; docs/testing.md says which to use).
-TIERS = ("unit", "cli", "ros", "faults", "hosts", "slow")
+TIERS = ("unit", "cli", "ros", "faults", "hosts", "ros_tools", "slow")
 
 
 def _marks_in(path: Path) -> set[str]:

@@ -198,11 +198,11 @@ def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * M
     """Every recorded torque is exactly what torque_node (backward estimator) must compute
     from the sample it carries and the one before it: qdd = backward difference of velocity
     over the stamps, 0 after a pause (warm-up). A pause is the node's adaptive stamp gap
-    (its default): longer than max_gap_ns AND GAP_PERIODS x the previous interval (a stalled
-    publisher's slow samples are not pauses). `prev` (stamp, velocity): the sample the node
+    (its default; estimation/stamps.py): longer than 0.1 s AND 5 x the previous step (a
+    stalled publisher's slow samples are not pauses). `prev` (stamp, velocity): the sample the node
     answered before the first one of the series (its answer not in the series), else the
     first is a warm-up. Returns the number of warm-up samples."""
-    from forearm_dynamics.nodes.stream_node import GAP_PERIODS
+    from forearm_dynamics.estimation.stamps import CONTINUE, StampRule
 
     t, pos, vel, eff = series["stamp"], series["position"], series["velocity"], series["effort"]
     assert len(t) and np.all(np.diff(t) > 0), "torques out of order or repeated"
@@ -211,10 +211,9 @@ def check_torque_stream(series: dict[str, np.ndarray], max_gap_ns: int = 100 * M
     qdd = np.zeros_like(vel)
     dt = np.diff(t)
     cont = np.empty(len(dt), bool)
-    last_dt = 0
+    rule = StampRule(0.0 if max_gap_ns == 100 * MS else max_gap_ns * 1e-9)  # the node's
     for k, d in enumerate(dt.tolist()):
-        cont[k] = d <= max(max_gap_ns, GAP_PERIODS * last_dt)
-        last_dt = d if cont[k] else 0
+        cont[k] = rule.step(d) == CONTINUE
     step = (vel[1:] - vel[:-1]) * (1.0 / (dt * 1e-9))[:, None]
     qdd[1:][cont] = step[cont]
     if prev is not None:

@@ -68,3 +68,20 @@ def test_installed_executable_runs_from_the_install_tree(install, tmp_path):
                        timeout=60, check=False)
     assert r.returncode == 0, r.stderr
     assert "<robot" in out.read_text()
+
+
+def test_launch_files_installed_as_data(install):
+    """colcon installs launch/*.launch.py where `ros2 launch forearm_dynamics` finds them; each
+    defines generate_launch_description (read as text: `launch` is not installed here, and
+    the package never imports it)."""
+    import ast
+
+    installed = sorted(p.name for p in (install / "share" / "forearm_dynamics" / "launch").glob("*.py"))
+    assert installed == sorted(p.name for p in (REPO / "launch").glob("*.launch.py"))
+    assert {"torque_node.launch.py", "record.launch.py", "demo.launch.py", "closed_loop.launch.py",
+            "viz.launch.py"} <= set(installed)
+    for name in installed:
+        tree = ast.parse((install / "share" / "forearm_dynamics" / "launch" / name).read_text())
+        assert "generate_launch_description" in {f.name for f in tree.body
+                                                 if isinstance(f, ast.FunctionDef)}, name
+    assert (install / "share" / "forearm_dynamics" / "examples" / "closed_loop.py").is_file()

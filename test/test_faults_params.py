@@ -56,6 +56,9 @@ INVALID = [
     ("torque_node", ["hand_length:=long"], "hand_length"),
     ("torque_node", ["hand_breadth:=-0.1"], "hand_breadth"),
     ("torque_node", ["split:=1.5"], "split"),
+    ("torque_node", ["shoulder:=ball"], "shoulder"),
+    ("torque_node", ["imu_topic:=upper_arm/imu"], "imu_topic"),  # needs a shoulder
+    ("torque_node", ["shoulder:=fullbody", "imu_mount:=[0.0, 0.0, 0.0]"], "imu_mount"),
     ("torque_node", ["split:=.inf"], "split"),
     ("torque_node", ["split:=half"], "split"),
     ("torque_node", ["estimator.accel_cutoff_hz:=.nan"], "estimator.accel_cutoff_hz"),
@@ -156,6 +159,7 @@ INVALID = [
     ("torque_node", ["estimator.delay_s:=0.5"], "estimator.delay_s"),  # beyond 0.2 s
     ("torque_node", ["estimator.delay_s:=-0.01"], "estimator.delay_s"),
     ("trajectory_publisher", ["movements:=[1.5]"], "movements"),
+    ("trajectory_publisher", ["shoulder:=elbow"], "shoulder"),
     ("trajectory_publisher", ["movements:=[]"], "movements"),
     ("trajectory_publisher", ["movements:=1"], "movements"),
     ("trajectory_publisher", ["movements:=[1,true]"], "movements"),

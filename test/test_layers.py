@@ -25,8 +25,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("estimation",),
     ("simulation",),
     ("uncertainty",),
+    ("muscles",),
     ("analysis", "viz", "bag", "codec", "formats"),
-    ("offline",),
+    ("offline", "muscle_validation"),
     ("nodes", "cli"),
 )
 RANK = {pkg: i for i, layer in enumerate(LAYERS) for pkg in layer}
@@ -131,6 +132,55 @@ def circles(g: dict[str, set[str]]) -> list[list[str]]:
         if v not in index:
             visit(v)
     return out
+
+
+#: Modules that may import rclpy and the ROS message packages: the nodes, and the codec's one
+#: ROS module that the offline tools (cli/, bag/, offline/) go through (docs/architecture.md).
+ROS_LAYER = ("nodes",)
+ROS_MODULES = (f"{PKG}.codec.ros",)
+#: Top-level modules that are ROS: rclpy, its interfaces, and every message package.
+ROS_ROOTS = ("rclpy", "rcl_interfaces", "builtin_interfaces", "lifecycle_msgs", "rosidl_runtime_py",
+             "launch", "launch_ros")
+
+
+def is_ros(module: str) -> bool:
+    root = module.split(".")[0]
+    return root in ROS_ROOTS or root.endswith(("_msgs", "_srvs"))
+
+
+def ros_imports(root: Path = ROOT) -> list[str]:
+    """Every `import rclpy` / `from std_msgs.msg import ...` outside the ROS layer."""
+    bad = []
+    for name, path in modules(root).items():
+        parts = name.split(".")
+        if name in ROS_MODULES or (len(parts) > 1 and parts[1] in ROS_LAYER):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            found = []
+            if isinstance(node, ast.Import):
+                found = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+                found = [node.module]
+            bad += [f"{name} imports {m}: go through {ROS_MODULES[0]}" for m in found if is_ros(m)]
+    return sorted(bad)
+
+
+def test_ros_only_in_the_ros_layer() -> None:
+    """One ROS layer: only nodes/ and codec/ros.py import rclpy or a message package."""
+    assert ros_imports() == []
+
+
+def test_the_ros_check_sees_a_ros_import(tmp_path) -> None:
+    pkg = tmp_path / PKG
+    for sub in ("", "cli", "codec", "nodes"):
+        (pkg / sub).mkdir(exist_ok=True)
+        (pkg / sub / "__init__.py").write_text("")
+    (pkg / "cli" / "tool.py").write_text("def f():\n    from rclpy.serialization import serialize_message\n")
+    (pkg / "cli" / "other.py").write_text("import std_msgs.msg\nfrom ..codec import ros\n")
+    (pkg / "codec" / "ros.py").write_text("import rclpy\n")
+    (pkg / "nodes" / "node.py").write_text("import rclpy\nfrom sensor_msgs.msg import JointState\n")
+    assert ros_imports(pkg) == [f"{PKG}.cli.other imports std_msgs.msg: go through {PKG}.codec.ros",
+                                f"{PKG}.cli.tool imports rclpy.serialization: go through {PKG}.codec.ros"]
 
 
 def test_every_package_has_a_layer() -> None:

@@ -42,7 +42,8 @@ def test_every_node_executable_with_parameters_is_in_the_catalog() -> None:
                 and getattr(n.targets[0], "id", "") == "EXECUTABLES")
     nodes = {k.value for k, v in zip(exes.keys, exes.values, strict=True)
              if ".nodes." in v.value}
-    assert nodes <= set(catalog.NODES), nodes - set(catalog.NODES)
+    assert nodes <= set(catalog.NODES) | set(catalog.SAME_PARAMETERS), nodes - set(catalog.NODES)
+    assert set(catalog.SAME_PARAMETERS.values()) <= set(catalog.NODES)
 
 
 def test_descriptions_are_sentences() -> None:

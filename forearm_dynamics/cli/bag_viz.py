@@ -29,12 +29,11 @@ from pathlib import Path
 
 import numpy as np
 from mcap.exceptions import McapError
-from rclpy.serialization import deserialize_message, serialize_message
-from std_msgs.msg import String
 from zstandard import ZstdError
 
 from ..bag import BagWriter, TopicQos, open_bag
 from ..bag.augment import NotIndexed, augment
+from ..codec import ros
 from ..codec.jointstate import TorqueReader
 from ..errors import BagError, ForeignBag
 from ..exit_codes import OK
@@ -120,7 +119,7 @@ class _Drawer:
         key, maker, urdf = self.models.at(stamp)
         out = []
         if key != self.current:
-            out.append((1, log_time, serialize_message(String(data=urdf))))
+            out.append((1, log_time, ros.serialize(ros.message("String")(data=urdf))))
         try:
             _, q, tau = self.reader.decode(maker.scene.joint_names)
             frame = maker.frame(q, tau)
@@ -182,7 +181,7 @@ def bag_viz(args) -> dict:
     if cfg_ch is not None:
         for _ch, msg in bag.messages([cfg_ch.topic]):
             try:
-                cfg = json.loads(deserialize_message(msg.data, String).data)
+                cfg = json.loads(ros.deserialize(msg.data, "String").data)
             except ValueError:
                 continue
             if isinstance(cfg, dict):

@@ -2,7 +2,7 @@
 
     check_bag BAG [--json OUT] [--html REPORT.html] [--thresholds config/check.yaml]
                   [--reference FILE] [--max-latency-p99-ms MS]
-                  [--std-coverage LO,HI] [--std-ratio LO,HI]
+                  [--std-coverage LO,HI] [--std-ratio LO,HI] [--cutoff HZ]
     check_bag BAG --recover OUT
 
 Exit codes (forearm_dynamics.exit_codes) mean correctness, not speed:
@@ -17,7 +17,9 @@ Exit codes (forearm_dynamics.exit_codes) mean correctness, not speed:
             movement), or a bad argument: one line, no traceback.
 A truncated bag that still holds data is analysed, with a warning. A bag without movement
 markers (any recording) is scored as one segment against its own filtered positions
-(offline/score.py: reported, gated only on loss and non-finite torques); `--baseline OLD`
+(offline/score.py: reported, gated only on loss and non-finite torques; the positions are
+low-passed at the practice's 6 Hz, or at 0.4 x the bag's rate when that is lower, said in a
+warning: a 10 Hz bag at 4 Hz; `--cutoff HZ` chooses); `--baseline OLD`
 compares two runs' torques stamp by stamp (offline/regression.py: exit 1 above --tolerance or
 on any unmatched sample).
 
@@ -99,6 +101,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--std-ratio", type=_range, metavar="LO,HI", default=None,
                     help="fail if any DOF group's RMS(σ)/RMSE is outside [LO, HI], e.g. 0.8,1.5; "
                          "default: reported only")
+    ap.add_argument("--cutoff", type=float, default=None, metavar="HZ",
+                    help="without markers: the reference's zero-phase low-pass cutoff (default "
+                         "the practice's 6 Hz, or 0.4 x the bag's rate when lower; said)")
     ap.add_argument("--baseline", type=Path, metavar="OLD",
                     help="regression: compare joint_torques with OLD's, stamp by stamp")
     ap.add_argument("--tolerance", type=float, default=1e-6, metavar="NM",
@@ -315,13 +320,14 @@ def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> 
     if not info.complete:
         rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
                             f"{info.message_count} messages of its complete chunks")
-    report = score.analyse_markerless(rec, choice, th)
+    report = score.analyse_markerless(rec, choice, th, cutoff_hz=args.cutoff)
     code = DATA if report.failures else OK
     print("\n".join(score.format_score(report, info)))
     if args.html is not None:
         from ..offline.html_report import render_segment, write_html
+        from ..offline.muscle_html import with_muscles
 
-        write_html(args.html, render_segment(report, rec, info, code))
+        write_html(args.html, with_muscles(render_segment(report, rec, info, code), open_bag(args.bag)))
     if args.json is not None:
         args.json.write_text(json.dumps({**score.score_dict(report), "exit_code": code}, indent=1),
                              encoding="utf-8")
@@ -364,6 +370,9 @@ def run(args: argparse.Namespace) -> int:
     rec.warnings[:0] = config_warnings
     if not rec.markers:  # any recording (a subject's session): scored as one segment
         return _markerless(args, rec, choice, th, info)
+    if args.cutoff is not None:
+        raise ValueError("--cutoff sets the reference of a bag without movement markers; this "
+                         "bag has markers (its reference is the movements' own torques)")
     if not any(_known_movement(m.id) for m in rec.markers):
         ids = sorted({m.id for m in rec.markers})
         raise ForeignBag(f"{args.bag}: no movement marker names a known movement (ids "
@@ -393,8 +402,10 @@ def run(args: argparse.Namespace) -> int:
         args.json.write_text(json.dumps(doc, indent=1), encoding="utf-8")
     if args.html is not None:
         from ..offline.html_report import render, write_html
+        from ..offline.muscle_html import with_muscles
 
-        write_html(args.html, render(report, rec, ref, info, code, latency_lines(report, th)))
+        write_html(args.html, with_muscles(render(report, rec, ref, info, code,
+                                                  latency_lines(report, th)), bag))
     return code
 
 

@@ -119,40 +119,74 @@ def _is_float(s: str) -> bool:
     return True
 
 
+SIDES = ("right", "left")
+
+
 @dataclass(frozen=True)
 class CoordinateMap:
-    """config/opensim_coordinates.yaml: OpenSim name -> (our joint, sign, offset rad)."""
+    """config/opensim_coordinates.yaml: OpenSim name -> (our joint, sign, offset rad).
+
+    An entry may say `side: right|left` (full-body models name both arms: `elbow_flex_r`,
+    `elbow_flex_l`); map_motion uses the entries of the side asked for and reports the other
+    arm's columns as such. `strict` (a map the user gave with --map): every entry of the side
+    must name a column of the file, so a typo is an error, not a joint silently held at 0.
+    """
 
     coordinates: dict[str, tuple[str, float, float]]
     not_modelled: frozenset[str]
     hold: dict[str, float]  # rad
+    sides: dict[str, str] = field(default_factory=dict)  # OpenSim name -> 'right'|'left'
+    path: Path | None = None
+    strict: bool = False
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None) -> CoordinateMap:
+        """The package's map (lenient: it names many models' columns), or the user's
+        (strict: every entry must be in the file)."""
+        strict = path is not None
         path = Path(path) if path is not None else config_file("opensim_coordinates.yaml")
-        with open(path, encoding="utf-8") as fh:
-            cfg = yaml.safe_load(fh) or {}
-        coords = {}
+        try:
+            with open(path, encoding="utf-8") as fh:
+                cfg = yaml.safe_load(fh) or {}
+        except OSError as exc:
+            raise MotionError(f"{path}: cannot read the coordinate map ({exc.strerror or exc})") from None
+        except yaml.YAMLError as exc:
+            raise MotionError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        coords, sides = {}, {}
         for name, spec in (cfg.get("coordinates") or {}).items():
-            joint = spec["joint"]
+            joint = spec.get("joint") if isinstance(spec, dict) else None
             if joint not in JOINT_NAMES:
-                raise MotionError(f"{path}: coordinate {name} maps to unknown joint {joint!r}")
+                raise MotionError(f"{path}: coordinate {name} maps to unknown joint {joint!r} "
+                                  f"(joints: {', '.join(JOINT_NAMES[:4])}, ...)")
             coords[str(name)] = (joint, float(spec.get("sign", 1)),
                                  math.radians(float(spec.get("offset_deg", 0))))
+            if "side" in spec:
+                if spec["side"] not in SIDES:
+                    raise MotionError(f"{path}: coordinate {name}: side {spec['side']!r} is not "
+                                      "right or left")
+                sides[str(name)] = spec["side"]
         for j in JOINT_NAMES:  # our own names map to themselves
             coords.setdefault(j, (j, 1.0, 0.0))
         hold = {str(k): math.radians(float(v)) for k, v in (cfg.get("hold_posture_deg") or {}).items()}
         unknown = sorted(set(hold) - set(JOINT_NAMES))
         if unknown:
             raise MotionError(f"{path}: hold_posture_deg names unknown joints {unknown}")
-        return cls(coords, frozenset(str(x) for x in cfg.get("not_modelled") or ()), hold)
+        return cls(coords, frozenset(str(x) for x in cfg.get("not_modelled") or ()), hold,
+                   sides, path, strict)
 
     def opensim_name(self, joint: str) -> tuple[str, float]:
         """The OpenSim coordinate of one of our joints (first MoBL/ARMS name) and its sign."""
         for name, (j, sign, _off) in self.coordinates.items():
-            if j == joint and name != joint:
+            if j == joint and name != joint and name not in self.sides:
                 return name, sign
         return joint, 1.0
+
+    def for_side(self, side: str) -> dict[str, tuple[str, float, float]]:
+        """The entries that apply to one arm: those of that side and those without a side."""
+        return {n: v for n, v in self.coordinates.items() if self.sides.get(n, side) == side}
+
+    def other_side(self, side: str) -> frozenset[str]:
+        return frozenset(n for n, s in self.sides.items() if s != side)
 
 
 @dataclass
@@ -167,6 +201,8 @@ class MappedMotion:
     not_modelled: list[str]
     unknown: list[str]
     notes: list[str] = field(default_factory=list)
+    other_arm: list[str] = field(default_factory=list)  # the other side's arm columns
+    as_given: np.ndarray | None = None  # (N, 20) q before the map's offsets (ranges.py)
 
 
 def _coordinate_of(label: str) -> tuple[str, str]:
@@ -179,16 +215,31 @@ def _coordinate_of(label: str) -> tuple[str, str]:
     return label, "value"
 
 
-def map_motion(m: Motion, cmap: CoordinateMap) -> MappedMotion:
+def map_motion(m: Motion, cmap: CoordinateMap, side: str = "right") -> MappedMotion:
+    """The file's columns as our joints (rad) for the arm `side`; a strict map's entry that
+    names no column of the file is a MotionError (a typo must not hold a joint at 0)."""
     scale = math.pi / 180.0 if m.in_degrees else 1.0
     n = len(m.time)
     q = np.zeros((n, len(JOINT_NAMES)))
     qd = np.zeros((n, len(JOINT_NAMES)))
     mapped, speeds = {}, set()
-    not_modelled, unknown, notes = [], [], []
+    not_modelled, unknown, notes, other_arm = [], [], [], []
+    entries, other = cmap.for_side(side), cmap.other_side(side)
+    offsets = np.zeros(len(JOINT_NAMES))
+    if cmap.strict:
+        present = {_coordinate_of(lab)[0] for lab in m.labels}
+        absent = [name for name in entries if name not in present and name not in JOINT_NAMES]
+        if absent:
+            raise MotionError(f"{cmap.path}: map entr{'y' if len(absent) == 1 else 'ies'} "
+                              f"{', '.join(absent[:5])}{' ...' if len(absent) > 5 else ''} name no "
+                              f"column of {m.path} (a typo? its columns: {', '.join(m.labels[:8])}"
+                              f"{' ...' if len(m.labels) > 8 else ''})")
     for c, label in enumerate(m.labels):
         coord, what = _coordinate_of(label)
-        hit = cmap.coordinates.get(coord)
+        hit = entries.get(coord)
+        if hit is None and coord in other and what in ("value", "speed"):
+            other_arm.append(label)
+            continue
         if hit is None or what == "other":
             if what == "value" or what == "speed":
                 (not_modelled if coord in cmap.not_modelled else unknown).append(label)
@@ -206,6 +257,7 @@ def map_motion(m: Motion, cmap: CoordinateMap) -> MappedMotion:
         if joint in mapped:
             raise MotionError(f"{m.path}: columns {mapped[joint]!r} and {label!r} both give {joint}")
         q[:, j] = sign * scale * m.data[:, c] + offset
+        offsets[j] = offset
         mapped[joint] = label
     if not mapped:
         raise MotionError(f"{m.path}: no column maps to a joint of the model (columns: "
@@ -219,25 +271,36 @@ def map_motion(m: Motion, cmap: CoordinateMap) -> MappedMotion:
     use_speeds = bool(speeds) and set(mapped) <= speeds
     if speeds and not use_speeds:
         notes.append("speeds given for some coordinates only: velocities left empty")
-    return MappedMotion(m.time, q, qd if use_speeds else None, mapped, held, not_modelled, unknown, notes)
+    return MappedMotion(m.time, q, qd if use_speeds else None, mapped, held, not_modelled, unknown,
+                        notes, other_arm, q - offsets)
 
 
 def write_table(path: str | os.PathLike, title: str, labels: list[str], time: np.ndarray,
                 data: np.ndarray, *, sep: str = "\t", opensim: bool = True,
-                stamps_ns: np.ndarray | None = None) -> None:
+                stamps_ns: np.ndarray | None = None, notes: dict[str, str] | None = None) -> None:
     """An OpenSim-readable table (header, endheader, labels, rows) or, opensim=False, CSV.
     Values are written with repr (shortest exact float text); `stamps_ns`, if given, as an
-    integer column `stamp_ns` after time."""
+    integer column `stamp_ns` after time. A value that is not finite (a σ not known while
+    the estimate warms up is inf on the topic) is written `NaN` in a table, an empty cell in
+    CSV (what OpenSim and CSV readers take for missing), never `inf`. `notes` {key: text}:
+    header lines `key=text` of a table (OpenSim keeps them as metadata); CSV has no header
+    but its column labels (the caller says them)."""
     path = Path(path)
     head = ["time", *(["stamp_ns"] if stamps_ns is not None else []), *labels]
+    missing = "NaN" if opensim else ""
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
         if opensim:
+            extra = "".join(f"{k}={' '.join(v.split())}\n" for k, v in (notes or {}).items())
             fh.write(f"{title}\nversion=1\nnRows={len(time)}\nnColumns={len(head)}\n"
-                     "inDegrees=no\nendheader\n")
+                     f"inDegrees=no\n{extra}endheader\n")
         fh.write(sep.join(head) + "\n")
+        finite = np.isfinite(data)
         for k in range(len(time)):
             cells = [repr(float(time[k]))]
             if stamps_ns is not None:
                 cells.append(str(int(stamps_ns[k])))
-            cells += [repr(float(x)) for x in data[k]]
+            if finite[k].all():
+                cells += [repr(float(x)) for x in data[k]]
+            else:
+                cells += [repr(float(x)) if ok else missing for x, ok in zip(data[k], finite[k], strict=True)]
             fh.write(sep.join(cells) + "\n")

@@ -34,7 +34,6 @@ read at start-up; runtime changes are refused.
 
 from __future__ import annotations
 
-import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,45 +56,6 @@ from .params import ParameterError, Params, Spec, init_node
 from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 from .spec import Settings
 
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-
-class _HeldStop:
-    """SIGINT/SIGTERM stop the recorder (KeyboardInterrupt), but never inside a write.
-
-    Why not pthread_sigmask around each write (the first version): a process-directed
-    signal that the main thread blocks is delivered to another thread (Fast DDS runs
-    several), whose C handler sets Python's flag, and the main thread raises
-    KeyboardInterrupt at its next bytecode all the same: inside mcap's writer, between a
-    record's write and its offset bookkeeping, that left a summary 4.5 kB before the data's
-    end (rosbags read a record length of 1e18 bytes; a fault-test run, SIGINT twice). This
-    Python handler, whichever thread took the signal, only notes it while a write runs;
-    the write's end raises it. The first stop is raised once: later signals are noted only
-    (closing must not be cut short; run() ignores them while the file is finished).
-    """
-
-    def __init__(self) -> None:
-        self.depth = 0  # writes in progress
-        self.pending = False
-        self.raised = False
-
-    def install(self) -> None:
-        for s in _STOP_SIGNALS:
-            signal.signal(s, self._on_signal)
-
-    def _on_signal(self, _signum, _frame) -> None:
-        if self.depth or self.raised:
-            self.pending = True
-            return
-        self.raised = True
-        raise KeyboardInterrupt
-
-    def release(self) -> None:
-        """After a write: raise the stop that came during it."""
-        if self.pending and not self.depth and not self.raised:
-            self.pending = False
-            self.raised = True
-            raise KeyboardInterrupt
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
 # History a latched subscription takes over when it matches: trajectory_publisher keeps its
 # last 100 markers, the torque node its last config; a burst of history must not overwrite
@@ -219,11 +179,10 @@ class BagRecorder(RealtimeNode, Node):
         self.done = Future()
         self.exit_code = OK
         self.executor_kind = "events"
-        # SIGINT reaches Python as KeyboardInterrupt at any bytecode (rclpy passes it on), also
-        # while the file is being made: a writer not yet made leaves no file behind (the
-        # file is ours: created exclusively), a made one is finished as a complete bag.
+        # SIGINT/SIGTERM never raise here (common.hold_stop_signals: they only request the
+        # stop, which run() carries out after the spin): a write is never cut short, and a
+        # stop during start-up finishes a made file as a complete bag (finish()).
         self.writer = None
-        self._held = _HeldStop()
         existed = path.exists()
         try:
             self.writer = BagWriter(path, chunk_size=chunk_size, flush_period_s=flush_period,
@@ -240,7 +199,6 @@ class BagRecorder(RealtimeNode, Node):
                     self._streams.append((plan, topic, channel))
             self.create_timer(flush_period, self._flush_if_due)
             self.create_timer(DISCOVERY_POLL_S, self._adapt_qos)
-            self._held.install()  # from here a stop waits for the write it lands in
         except BagWriteError as exc:
             if self.writer is not None:
                 self.writer.abort()
@@ -260,23 +218,18 @@ class BagRecorder(RealtimeNode, Node):
     def _callback(self, channel: int, muted: set[int] | None = None):
         """The raw callback writing to `channel`; it drops what it gets once `channel` is in
         `muted` (a reliable subscription replaced by a best-effort one, see _adapt_qos)."""
-        write, now, held = self.writer.write, time.time_ns, self._held
+        write, now = self.writer.write, time.time_ns
 
         def on_message(data: bytes) -> None:
             if muted and channel in muted:
                 return
-            # SIGINT/SIGTERM held while the message is added (_HeldStop): a KeyboardInterrupt
-            # inside mcap's add_message left its statistics counting a message no chunk
+            # No signal interrupts this write (common.hold_stop_signals): a KeyboardInterrupt
+            # inside mcap's add_message once left its statistics counting a message no chunk
             # holds (rosbags then read 5688 messages of 5689 counted; a loaded fault-test run).
-            held.depth += 1
             try:
                 write(channel, data, now())
             except BagWriteError as exc:
                 self._stop(exc)
-            finally:
-                held.depth -= 1
-            if held.pending:
-                held.release()
 
         return on_message
 
@@ -303,16 +256,10 @@ class BagRecorder(RealtimeNode, Node):
             self.get_logger().info(f"{topic}: subscribed best effort, as its publisher(s) offer")
 
     def _flush_if_due(self) -> None:
-        held = self._held
-        held.depth += 1  # a chunk is written whole (_HeldStop)
-        try:
+        try:  # a chunk is written whole: no signal interrupts it (common.hold_stop_signals)
             self.writer.flush_if_due()
         except BagWriteError as exc:
             self._stop(exc)
-        finally:
-            held.depth -= 1
-        if held.pending:
-            held.release()
 
     def _stop(self, exc: BagWriteError) -> None:
         if not self.done.done():
@@ -327,17 +274,13 @@ class BagRecorder(RealtimeNode, Node):
         # After SIGINT/SIGTERM the context is gone: the node's logger would fail to reach
         # /rosout (an rcl error line), so log through a plain logger then.
         log = self.get_logger() if self.context.ok() else rclpy.logging.get_logger("bag_recorder.close")
-        # A second SIGINT/SIGTERM must not cut the summary short: closing takes milliseconds.
-        held = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+        # A second SIGINT/SIGTERM cannot cut the summary short: it only notes a stop.
         try:
             self.writer.close()
         except BagWriteError as exc:
             if self.exit_code == OK:
                 log.error(str(exc))
             return DATA
-        finally:
-            for s, handler in held.items():
-                signal.signal(s, handler)
         counts = ", ".join(f"{t} {n}" for t, n in self.writer.counts().items())
         log.info(f"wrote {self.writer.message_count} messages to {self.writer.path} "
                                f"({counts})")

@@ -35,6 +35,13 @@ NODES: dict[str, tuple[str, str, str]] = {
                 "the virtual arm: joint_commands torques -> forward dynamics -> joint_states"),
     "arm_viz": ("forearm_dynamics.nodes.arm_viz_settings", "SPECS",
                 "arm markers (MarkerArray) from joint_torques and the torque node's config"),
+    "muscle_node": ("forearm_dynamics.nodes.muscle_settings", "SPECS",
+                    "joint_torques -> muscle_forces: static optimisation of every torque sample"),
+}
+
+#: executables that take another node's parameters (the same Specs, the same config file)
+SAME_PARAMETERS: dict[str, str] = {
+    "torque_lifecycle_node": "torque_node",  # the managed torque node (nodes/lifecycle.py)
 }
 
 ROOT = Path(__file__).resolve().parents[2]

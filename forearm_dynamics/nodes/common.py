@@ -12,6 +12,7 @@ from rclpy.exceptions import NameValidationException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from threadpoolctl import threadpool_limits
 
@@ -70,7 +71,7 @@ def spin(node: Node, executor=None, timeout_sec: float = 0.5, done: Future | Non
     done = done or Future()
     executor.add_node(node)
     try:
-        while rclpy.ok() and not done.done():
+        while rclpy.ok() and not done.done() and not STOP.requested:
             executor.spin_until_future_complete(done, timeout_sec=timeout_sec)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -86,6 +87,40 @@ def spin(node: Node, executor=None, timeout_sec: float = 0.5, done: Future | Non
             pass
 
 
+class _Stop:
+    """Whether SIGINT/SIGTERM came (and how many): see hold_stop_signals()."""
+
+    requested = False
+    count = 0
+
+
+STOP = _Stop()
+
+
+def _on_stop_signal(signum, frame) -> None:  # noqa: ARG001 - the signal module's signature
+    STOP.requested = True
+    STOP.count += 1
+
+
+def hold_stop_signals() -> None:
+    """SIGINT and SIGTERM only request a stop: they never raise, and never shut the context
+    down under a running callback.
+
+    rclpy's own handlers (rclpy.init's default) shut the context down from the signal and
+    then let Python's SIGINT handler raise KeyboardInterrupt wherever the main thread is.
+    Under the EventsExecutor that is inside callbacks called from C++: a KeyboardInterrupt
+    in a service callback cannot be carried back out by pybind11 and the process aborts
+    ("terminate called after throwing ... error_already_set", exit -6; torque_node did in 4
+    of 6 stops under `ros2 launch`, which forwards SIGINT while the terminal or `timeout`
+    signals the group: two signals), and a subscription callback publishing on the shut
+    context is logged as [FATAL] with a traceback. So run() starts rclpy without its
+    handlers and this one only notes the stop; spin() ends at its next turn (<= 0.5 s), and
+    run() then shuts the context down and finishes the node however many signals came.
+    """
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, _on_stop_signal)
+
+
 def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
     """Create the node, spin it, clean up: the one main loop of every node.
 
@@ -98,11 +133,15 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
     rcl failures reach Python as rclpy's RCLError, a RuntimeError: caught by that public
     base class (the class itself lives in rclpy's private extension module).
     """
+    hold_stop_signals()
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as exc:  # an unreadable --params-file or malformed --ros-args
         print(f"[ERROR] [{name}]: invalid arguments: {exc}", file=sys.stderr)
         return USAGE
+    if STOP.requested:  # SIGINT/SIGTERM during start-up: a stop, nothing done yet
+        rclpy.try_shutdown()
+        return OK
     node = None
     try:
         try:
@@ -136,10 +175,13 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
         on_serving = getattr(node, "on_serving", None)
         if callable(on_serving):
             on_serving()
-        try:
-            spin(node, executor, done=getattr(node, "done", None))
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
+        if not STOP.requested:  # (a stop during start-up: the node made, nothing to serve)
+            try:
+                spin(node, executor, done=getattr(node, "done", None))
+            except (KeyboardInterrupt, ExternalShutdownException):
+                pass
+        if STOP.requested:  # out of the executor: the context goes (helper threads see it)
+            rclpy.try_shutdown()
         try:
             return _finish(node)
         except KeyboardInterrupt:  # a second SIGINT before the first lines of _finish held it
@@ -171,4 +213,9 @@ def main_for(make_node: Callable[[], Node], name: str) -> None:
         code = run(make_node, name, sys.argv)
     except KeyboardInterrupt:  # SIGINT before rclpy's handlers exist: a stop, nothing done yet
         code = OK
+    # Done: a late SIGINT/SIGTERM is ignored from here. At exit Python sets a signal it
+    # handles in Python back to SIG_DFL, and a second signal 0.1 s after the first (ros2
+    # launch and a terminal both) then killed a node that had stopped cleanly (exit -2).
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_IGN)
     sys.exit(code)

@@ -14,8 +14,9 @@ Why, measured (py-spy, line_profiler, `make bench`): docs/architecture.md, "The 
 nodes' hot path".
 
 Stamp rules (G = max_stamp_gap; with max_stamp_gap 0, the default, G adapts to the stream:
-max(0.1 s, 5 x the previous sample interval), so a 20 Hz (or 5 Hz) stream is not a gap at
-every sample while a 1 kHz stream that pauses 0.1 s is):
+max(0.1 s, 5 x the previous stamp step; 0.5 s for a stream's first step), so a 10 Hz (or
+5 Hz) stream is not a gap at any sample while a 1 kHz stream that pauses 0.1 s is; one
+rule for the node and bag_torques: estimation/stamps.py):
     stamp zero                      -> rejected (stamp_missing)
     stamp negative, nanosec >= 1e9  -> rejected (stamp_invalid)
     0 < stamp - last <= G           -> normal sample
@@ -43,6 +44,15 @@ from sensor_msgs.msg import JointState
 
 from ..codec.jointstate_cdr import STAMP, OutputTemplate
 from ..deadlines import REASONS_INPUT, REASONS_TIMER, Deadlines
+from ..estimation.stamps import (
+    CONTINUE,
+    FIRST_STEP_MAX_S,
+    GAP,
+    GAP_PERIODS,
+    JUMP_BACK,
+    MIN_ADAPTIVE_GAP_S,
+    StampRule,
+)
 from ..gcwatch import GcWatch
 from . import validation as v
 from .common import CONFIG_TOPIC, EXECUTORS, stream_qos
@@ -67,11 +77,6 @@ NODE_CONFIG_TOPIC = "~/config"
 RESERVED_TOPICS = {"/diagnostics": "diagnostics topic", NODE_CONFIG_TOPIC: "node's config topic",
                    CONFIG_TOPIC: "torque_node's config topic"}
 
-#: Adaptive max_stamp_gap (max_stamp_gap = 0): a gap resets the estimator when it exceeds
-#: both MIN_ADAPTIVE_GAP_S and GAP_PERIODS x the previous sample interval.
-MIN_ADAPTIVE_GAP_S = 0.1
-GAP_PERIODS = 5
-
 STREAM_SPECS = (
     Spec("input_topic", "joint_states", "JointState input topic (remappable too)"),
     Spec("output_topic", "joint_torques", "JointState output topic, model joint order"),
@@ -87,7 +92,7 @@ STREAM_SPECS = (
     Spec("diagnostics_period", 1.0, "time between /diagnostics messages; 0 = none", "s", 0.0, 3600.0),
     Spec("max_stamp_gap", 0.0, "a stamp jump larger than this resets the estimator history; "
          f"0 = adaptive: larger than {MIN_ADAPTIVE_GAP_S:g} s and {GAP_PERIODS} x the previous "
-         "sample interval", "s", 0.0, 3600.0),
+         f"stamp step ({FIRST_STEP_MAX_S:g} s for the stream's first step)", "s", 0.0, 3600.0),
     Spec("deadline_ms", 1.0, "an output published later than this after its input's arrival "
          "(with output_rate_hz: after its scheduled time) is a missed deadline, counted per "
          "reason in /diagnostics and the shutdown summary; it is published all the same; "
@@ -146,7 +151,7 @@ class JointStreamNode(RealtimeNode, Node):
     config_name: str = ""  # config/<config_name>.yaml holds the defaults
 
     def __init__(self, node_name: str):
-        init_node(self, node_name)
+        self._init_ros_node(node_name)
         self.params = Params(self, self.specs, self.config_name or node_name)
         self.settings = StreamSettings.from_params(self.params)
         self.executor_kind = self.settings.executor
@@ -156,7 +161,8 @@ class JointStreamNode(RealtimeNode, Node):
 
         self.joint_names = tuple(joint_names)
         hold = self.hold_posture()  # missing_joints: hold -> (n,) posture, else None (reject)
-        self.names = v.NameMatcher(self.joint_names, hold=hold is not None)
+        self.names = v.NameMatcher(self.joint_names, hold=hold is not None,
+                                   aliases=self.input_aliases(), external=self.external_joints())
         self._hold = hold
         self.held_joints: tuple[str, ...] = ()  # held in the last input (missing_joints: hold)
         #: compute() sets this when its output is the estimate of another stamp (a delay)
@@ -172,10 +178,9 @@ class JointStreamNode(RealtimeNode, Node):
         self._plan: InputPlan = GENERIC  # the last message's (the steady state: one shape)
         self._stamp = STAMP.unpack_from
         self._last_t_ns: int | None = None
-        self._adaptive_gap = self.settings.max_stamp_gap == 0.0
-        self._max_gap_ns = round((MIN_ADAPTIVE_GAP_S if self._adaptive_gap
-                                  else self.settings.max_stamp_gap) * 1e9)
-        self._last_dt_ns = 0  # previous sample interval (adaptive gap); 0 = none yet
+        self.stamp_rule = StampRule(self.settings.max_stamp_gap)  # the jump rule
+        self._max_gap_ns = self.stamp_rule.fast_ns  # steps up to this always continue
+        self._step_pending = True  # on_first_step not called yet
         self._warned: dict[str, tuple[float, int]] = {}
         # the after_output hook costs a call per output only where a subclass defines it
         overridden = type(self).after_output is not JointStreamNode.after_output
@@ -198,6 +203,11 @@ class JointStreamNode(RealtimeNode, Node):
             f"(depth {s.qos_depth}, {_rel(s.input_reliable, s.output_reliable)}, "
             f"{s.executor} executor)"
         )
+
+    def _init_ros_node(self, node_name: str) -> None:
+        """rclpy's Node.__init__ (params.init_node); the managed node (lifecycle.py) made its
+        rclpy node before and runs this constructor as its configure transition."""
+        init_node(self, node_name)
 
     def summary(self) -> str:
         """One line for the log at shutdown: processed, rejected by reason, warm-up, resets."""
@@ -236,9 +246,15 @@ class JointStreamNode(RealtimeNode, Node):
         """Called after each /diagnostics message (e.g. to republish a latched config)."""
 
     def sample_interval_s(self, default: float = 1e-3) -> float:
-        """The interval between the last two accepted input stamps (s); `default` before
-        two samples, or right after a reset."""
-        return self._last_dt_ns * 1e-9 if self._last_dt_ns else default
+        """The stream's last stamp step (s, the last two accepted inputs'; a gap counts
+        until the next step); `default` before two samples."""
+        dt = self.stamp_rule.interval_ns
+        return dt * 1e-9 if dt else default
+
+    def on_first_step(self, d_ns: int) -> None:
+        """Called once, at the stream's first step that continues its history (normally its
+        second sample), with the step (ns): the first moment the stream's rate is known
+        (torque_node says if it is below the supported rates)."""
 
     def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool | None:
         """Fill self.effort (and self.qd if not velocity_given); return warm, or None when
@@ -317,6 +333,14 @@ class JointStreamNode(RealtimeNode, Node):
                                    f"{', '.join(self.held_joints[:6])}"
                                    + (" ..." if len(held) > 6 else "") + " (missing_joints: hold)")
 
+    def input_aliases(self) -> dict[str, str]:
+        """Other names an input may give a model joint -> the model's name (none here)."""
+        return {}
+
+    def external_joints(self) -> frozenset[str]:
+        """Model joints another input supplies: not required in joint_states (none here)."""
+        return frozenset()
+
     def hold_posture(self) -> np.ndarray | None:
         """missing_joints: hold -> the posture (rad, model order) of the joints an input
         lacks; None (the default) refuses such inputs. Subclasses with the parameter."""
@@ -384,18 +408,20 @@ class JointStreamNode(RealtimeNode, Node):
         reset = last is None
         if reset:
             v.check_jump(t_ns, None)
-            d = 0
         else:
             d = t_ns - last
-            if not 0 < d <= self._max_gap_ns:  # rare: a gap, a jump back or a repeat
-                gap = self._max_gap_ns
-                if self._adaptive_gap:  # a slow stream is not a gap (see STREAM_SPECS)
-                    gap = max(gap, GAP_PERIODS * self._last_dt_ns)
-                if d > gap:
+            rule = self.stamp_rule
+            if 0 < d <= self._max_gap_ns:  # the steady state
+                if self._step_pending:
+                    self._first_step(d)
+                rule.interval_ns = d
+            else:  # rare: a slow stream, a gap, a jump back or a repeat (estimation/stamps.py)
+                verdict = rule.judge(d)
+                if verdict == GAP:
                     v.check_jump(t_ns, last)
                     reset = True
                     self.stats.resets["stamp_gap"] += 1
-                elif d < -gap:
+                elif verdict == JUMP_BACK:
                     v.check_jump(t_ns, last)
                     reset = True
                     self.stats.resets["stamp_jump_back"] += 1
@@ -403,14 +429,21 @@ class JointStreamNode(RealtimeNode, Node):
                         f"header.stamp jumped back {-d / 1e9:.3f} s: source restarted? "
                         "estimator history reset", throttle_duration_sec=WARN_EVERY_S
                     )
-                elif d <= 0:
+                elif verdict != CONTINUE:
                     raise v.Rejection(
                         v.STAMP_NOT_INCREASING,
                         f"stamp {t_ns} ns is {-d} ns at or before the previous sample",
                     )
+                if d > 0:
+                    if self._step_pending and not reset:
+                        self._first_step(d)
+                    rule.interval_ns = d
         self._last_t_ns = t_ns
-        self._last_dt_ns = 0 if reset else d
         return t_ns, reset
+
+    def _first_step(self, d_ns: int) -> None:
+        self._step_pending = False
+        self.on_first_step(d_ns)
 
     def _warn(self, r: v.Rejection) -> None:
         """One warning per reason per WARN_EVERY_S, with the number suppressed meanwhile."""

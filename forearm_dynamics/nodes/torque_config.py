@@ -33,6 +33,7 @@ from ..estimation import (
 from ..model_config import model_config
 from ..paths import config_file
 from ..payload import make_payload
+from ..shoulder import SHOULDER_CHOICES
 from ..uncertainty import NoCovariance, TorqueStd
 from .spec import ParameterError, Settings, Spec
 
@@ -103,6 +104,21 @@ INPUT_SPECS = (
          choices=("reject", "hold")),
     *(Spec(f"hold_posture.{j}", 0.0, f"With missing_joints hold, the angle {j} is held at when "
            "the input lacks it.", "rad", -2 * np.pi, 2 * np.pi) for j in JOINT_NAMES),
+    Spec("shoulder", "none", "The humerus' orientation as three more inputs (docs/shoulder.md): "
+         "none = welded vertical and still (the 20-joint model); mobl = MoBL-ARMS angles "
+         "(shoulder_elevation_plane, shoulder_elevation, shoulder_rotation; or elv_angle, "
+         "shoulder_elv, shoulder_rot); fullbody = OpenSim full-body angles (arm_flexion, "
+         "arm_adduction, arm_rotation; or arm_flex_r, arm_add_r, arm_rot_r, _l for the left "
+         "side). The angles come in joint_states (or from imu_topic); the output then holds "
+         "23 names: the shoulder's generalized forces last",
+         choices=SHOULDER_CHOICES),
+    Spec("imu_topic", "", "sensor_msgs/Imu on the upper arm: its orientation gives the shoulder "
+         "angles (needs shoulder mobl or fullbody; joint_states then need not carry them, and "
+         "their velocities are estimated from the angles); '' = off"),
+    Spec("imu_mount", [0.0, 0.0, 0.0, 1.0], "the humerus frame in the Imu's frame, as a "
+         "quaternion (x, y, z, w); identity = the sensor's x anterior, y along the humerus "
+         "toward the shoulder, z lateral. The Imu's world is REP 103's (z up, ENU); only its "
+         "tilt matters to the torques", "", -1.0, 1.0),
 )
 
 OUTPUT_SPECS = (
@@ -148,6 +164,7 @@ class ModelRequest:
     estimator: str
     estimator_settings: tuple[tuple[str, float], ...]
     subject_std: str = "none"  # the σ's subject part (uncertainty/subject.py)
+    shoulder: str = "none"  # the moving humerus' convention (read-only parameter; shoulder.py)
 
     @classmethod
     def from_values(cls, v: dict[str, Any]) -> ModelRequest:
@@ -178,7 +195,7 @@ class ModelRequest:
                   inertia if any(inertia) else None, placement, None if split == -1.0 else split,
                   v["estimator"], tuple((k.removeprefix("estimator."), float(x))
                                         for k, x in sorted(v.items()) if k.startswith("estimator.")),
-                  v.get("subject_std", _SUBJECT_DEFAULT))
+                  v.get("subject_std", _SUBJECT_DEFAULT), v.get("shoulder", "none"))
         try:  # the core's own checks (cheap), so a refused payload never reaches the worker
             make_payload(req.payload_mass, req.com_or_default(), req.payload_inertia, np.zeros(3))
         except ValueError as exc:
@@ -220,6 +237,8 @@ class ModelRequest:
             kw["placement"] = self.placement
         if self.split is not None:
             kw["split"] = self.split
+        if self.shoulder != "none":
+            kw["shoulder"] = self.shoulder
         return kw
 
     def same_estimator(self, other: ModelRequest) -> bool:

@@ -15,6 +15,12 @@ Output sensor_msgs/JointState on `joint_torques`: the model's 20 joints in joint
        nothing is published (said in /diagnostics): never a stale repeat, never an
        extrapolation beyond input_timeout.
 
+Angles are checked against the joints' ranges (forearm_dynamics/ranges.py, the check every
+input path shares): a sample far outside (degrees sent as radians) is rejected
+(angle_out_of_range) with a line naming units, and /diagnostics turns ERROR while such
+samples come; a joint moderately outside is warned about once; a stream whose first 1 s
+stay within +-3 deg while moving (radians converted twice) is warned about once (WARN).
+
 Velocity and acceleration come from the state estimator (parameter `estimator`, settings
 `estimator.<name>`; forearm_dynamics/estimation). Bad samples are dropped and counted per
 reason (validation.py); stamp jumps beyond max_stamp_gap reset the estimator
@@ -47,10 +53,14 @@ import pinocchio as pin
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import String
 
+from ..description import JOINT_NAMES
+from ..estimation.stamps import MIN_SUPPORTED_RATE_HZ, rate_note
 from ..model_config import config_message
+from ..ranges import SampleGuard
+from ..shoulder import ENU_TO_WORLD, angles_from_rotation, convention, quaternion_matrix
 from ..version import package_version
 from . import validation as v
 from .common import latched_qos, main_for, stream_qos
@@ -77,6 +87,18 @@ _monotonic_ns = time.monotonic_ns
 _MAX_BACKLOG_S = 0.05
 
 
+def _torques(b: ModelBundle, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """RNEA of the bundle's model; with a shoulder, its public coordinates to the chain and
+    back (ShoulderArmModel.inverse_dynamics); non-finite comes back as NaN (the caller
+    refuses it)."""
+    if b.arm.nv == 20:
+        return pin.rnea(b.model, b.data, q, qd, qdd)
+    try:
+        return b.arm.inverse_dynamics(q, qd, qdd)
+    except ValueError:
+        return np.full(b.arm.nv, np.nan)
+
+
 class TorqueNode(JointStreamNode):
     """Inverse dynamics per sample: pin.rnea on preallocated q, qd, qdd."""
 
@@ -96,6 +118,10 @@ class TorqueNode(JointStreamNode):
         self._publish_config(self.live.in_use, 0)
         # a helper thread: stays at normal priority
         self._worker = ModelBuilder(self.build, self._publish_config)
+        if self._imu_topic:
+            self.imu_sub = self.create_subscription(Imu, self._imu_topic, self._on_imu,
+                                                    stream_qos(self.settings.qos_depth,
+                                                               self.settings.input_reliable))
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._after_set)
         if self.output_rate_hz > 0:
@@ -123,6 +149,32 @@ class TorqueNode(JointStreamNode):
     def hold_posture(self) -> np.ndarray | None:
         return self._hold_posture
 
+    def input_aliases(self) -> dict[str, str]:
+        """The shoulder's model-file names (both sides: the side may change live)."""
+        if self._shoulder == "none":
+            return {}
+        conv = convention(self._shoulder)
+        return {**conv.alias_map("right"), **conv.alias_map("left")}
+
+    def external_joints(self) -> frozenset[str]:
+        if not self._imu_topic:
+            return frozenset()
+        return frozenset(convention(self._shoulder).joint_names)
+
+    def _on_imu(self, msg: Imu) -> None:
+        """An upper-arm orientation -> the shoulder angles the next joint sample uses."""
+        o = msg.orientation
+        quat = (o.x, o.y, o.z, o.w)
+        if not math.isfinite(sum(quat)) or sum(x * x for x in quat) < 1e-6:
+            self._imu_bad += 1
+            if self._imu_bad == 1:
+                self.get_logger().warning(f"{self.imu_sub.topic_name}: orientation {quat} is not a "
+                                          "rotation (NaN or zero quaternion): ignored")
+            return
+        arm = self.live.in_use.arm
+        r = ENU_TO_WORLD @ quaternion_matrix(*quat) @ self._imu_mount
+        self._imu_angles = angles_from_rotation(arm.shoulder, arm.side, r, self._imu_angles)
+
     def configure(self, params: Params) -> tuple[str, ...]:
         out = self.output_settings = OutputSettings.from_params(params)
         self.missing_joints = params.value("missing_joints")
@@ -132,7 +184,23 @@ class TorqueNode(JointStreamNode):
         if out.publish_std:
             self._std_topic = params.topic("std_topic")
             params.distinct_topics(("input_topic", "output_topic", "std_topic"), RESERVED_TOPICS)
-        request = ModelRequest.from_values(params.values(LIVE))
+        self._shoulder = params.value("shoulder")
+        self._imu_topic = params.value("imu_topic").strip()
+        self._imu_angles: np.ndarray | None = None  # the latest Imu's shoulder angles
+        self._imu_bad = 0  # Imu messages refused (non-finite or zero quaternion)
+        if self._imu_topic and self._shoulder == "none":
+            raise ParameterError("imu_topic", "needs shoulder mobl or fullbody (which angles the "
+                                 "Imu's orientation is turned into)")
+        if self._shoulder != "none" and out.publish_std:
+            raise ParameterError("publish_std", "not available with a shoulder yet (the torque σ "
+                                 "is that of the 20-joint model)")
+        mount = [float(x) for x in params.value("imu_mount")]
+        if len(mount) != 4 or not math.isfinite(sum(mount)) or sum(x * x for x in mount) < 1e-6:
+            raise ParameterError("imu_mount", f"{mount}: needs a quaternion (x, y, z, w), not zero")
+        self._imu_mount = quaternion_matrix(*mount)
+        values = params.values(LIVE)
+        values["shoulder"] = self._shoulder
+        request = ModelRequest.from_values(values)
         try:
             bundle = build_bundle(request, 1, 20, std=self._std_topic)
         except ValueError as exc:
@@ -150,9 +218,11 @@ class TorqueNode(JointStreamNode):
         self._hold_posture = None
         self._held_stated: tuple[str, ...] = ()
         if self.missing_joints == "hold":
-            self._hold_posture = np.array([params.value(f"hold_posture.{j}")
-                                           for j in bundle.arm.joint_names])
+            self._hold_posture = np.array([params.value(f"hold_posture.{j}") if j in JOINT_NAMES
+                                           else 0.0 for j in bundle.arm.joint_names])
         self.live = LiveModel(bundle, make, self.config_message)
+        self._guard = SampleGuard(bundle.arm.joint_names)
+        self._far_seen = 0  # guard.far_count at the last /diagnostics
         # output_rate_hz > 0: whether the estimator holds a state to predict from, the input clock
         self._have_state = False
         self._last_in_ns = 0  # receive time of the last input (system clock)
@@ -165,12 +235,29 @@ class TorqueNode(JointStreamNode):
 
     # -- the hot path --------------------------------------------------------------------
     def compute(self, t_ns: int, reset: bool, velocity_given: bool) -> bool | None:
+        guard = self._guard
+        why = guard.check(self.q)  # 4 numpy calls when every angle is in range
+        if why is not None:  # before the estimator: its history keeps only real angles
+            raise v.Rejection(v.ANGLE_OUT_OF_RANGE, why)
+        if guard.pending_warnings:
+            for w in guard.pending_warnings:
+                self.get_logger().warning(w)
+            guard.pending_warnings.clear()
+        if not guard.window_done and guard.observe(t_ns, self.q):
+            self.get_logger().warning(guard.tiny_warning)
         b, fresh = self.live.current()  # a live change built: swapped in between two samples
         if fresh:
             self._have_state = False
             reset = True
         est = b.estimator
         ts = b.std
+        if self._imu_topic:  # the shoulder from the Imu: its latest orientation
+            angles = self._imu_angles
+            if angles is None:
+                raise v.Rejection(v.NO_IMU, f"no Imu on {self._imu_topic} yet: the shoulder angles "
+                                  "are unknown")
+            self.q[20:] = angles
+            velocity_given = False  # the shoulder's rates are estimated like the others'
         if reset:
             est.reset()
             if ts is not None:
@@ -199,7 +286,7 @@ class TorqueNode(JointStreamNode):
         # computed from it and the output message states it ("position and velocity as used")
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
-        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+        tau = _torques(b, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             est.reset()  # it has taken in the absurd sample: the next one starts afresh
             if ts is not None:
@@ -271,7 +358,7 @@ class TorqueNode(JointStreamNode):
         est.predict(stamp)  # from the last update's estimate, whatever was predicted before
         np.copyto(self.q, est.q)
         np.copyto(self.qd, est.qd)
-        tau = pin.rnea(b.model, b.data, self.q, self.qd, est.qdd)
+        tau = _torques(b, self.q, self.qd, est.qdd)
         if not math.isfinite(tau.sum()):
             self.stats.rejected[v.NON_FINITE_TORQUE] += 1
             return False
@@ -309,6 +396,7 @@ class TorqueNode(JointStreamNode):
                 why = self.params.specs[p.name].check(p.value) if p.name in self.params.specs else None
                 if why:
                     raise ParameterError(p.name, why)
+            values["shoulder"] = self._shoulder
             self._requested = ModelRequest.from_values(values)
         except ParameterError as exc:
             self.live.count("refused")
@@ -377,8 +465,23 @@ class TorqueNode(JointStreamNode):
         """State `b`: applied from `applies_from` (a stamp; 0 = the start), or built (None)."""
         self.config_pub.publish(String(data=self.live.config_text(b, applies_from)))
 
+    def on_first_step(self, d_ns: int) -> None:
+        """The input's rate is known: one line if it is below the supported rates."""
+        note = rate_note(d_ns * 1e-9)
+        if note is not None:
+            self.get_logger().warning(note)
+
     def diagnostic_values(self, status) -> dict[str, str]:
         b = self.live.in_use
+        dt = self.stamp_rule.interval_ns * 1e-9
+        rate = {"stamp_rate_hz": f"{1.0 / dt:.3g}" if dt > 0 else "unknown",
+                "rate_supported": "unknown" if dt <= 0 else
+                ("yes" if rate_note(dt) is None else f"no: below {MIN_SUPPORTED_RATE_HZ:g} Hz")}
+        if dt > 0 and rate_note(dt) is not None and status.level == status.OK \
+                and status.message != "no input":  # a stream's last step may be its pause
+            status.level = status.WARN
+            status.message = (f"input at {1.0 / dt:.3g} Hz: below the rates the estimator is "
+                              f"measured at ({MIN_SUPPORTED_RATE_HZ:g} Hz to 1 kHz)")
         desc = b.estimator.describe(self.sample_interval_s(), self._velocity_given)
         extra = {
             "config_id": str(b.config_id),
@@ -389,7 +492,19 @@ class TorqueNode(JointStreamNode):
             "missing_joints": self.missing_joints,
             "held_joints": ", ".join(self.held_joints) or "none",
             **{f"live_changes.{k}": str(n) for k, n in self.live.counts().items()},
+            **rate,
         }
+        guard = self._guard
+        if guard.far_count > self._far_seen:
+            status.level = status.ERROR
+            status.message = (f"{guard.far_count - self._far_seen} sample(s) with angles far outside "
+                              "the joints' ranges: check units (degrees as radians?)")
+            self._far_seen = guard.far_count
+        elif guard.tiny_warning:
+            status.level = max(status.level, status.WARN)
+            status.message = "angles all within +-3 deg while moving: check units (radians twice?)"
+        extra["angles_far_out_of_range"] = str(guard.far_count)
+        extra["angles_warned"] = ", ".join(sorted(guard.warned)) or "none"
         if self.output_rate_hz > 0:
             extra.update({f"timer_skipped.{k}": str(n) for k, n in self.timer_skipped.items()})
             if self._silent in ("input_timeout", "stamps_behind"):

@@ -48,6 +48,7 @@ from ..codec.jointstate_cdr import OutputTemplate
 from ..description import JOINT_NAMES
 from ..exit_codes import OK
 from ..movements import Movement, get_movement, movement_library
+from ..shoulder import CONVENTIONS, SHOULDER_CHOICES, synthetic_shoulder_motion
 from .common import EXECUTORS, latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, Spec, init_node
 
@@ -81,6 +82,9 @@ SPECS = (
     Spec("publish_velocity", True, "publish velocities (false: positions only, like motion capture)"),
     Spec("jitter_ms", 0.0, "stamp jitter: uniform in +-jitter_ms around the clock", "ms", 0.0, 1000.0),
     Spec("drop_fraction", 0.0, "probability that a sample is not published", "", 0.0, 0.9),
+    Spec("shoulder", "none", "also publish a synthetic shoulder motion (shoulder.SYNTHETIC: sines in "
+         "that convention's public names, after the 20 joints) for a torque_node with the same "
+         "shoulder; none = the 20 joints only", choices=SHOULDER_CHOICES),
     Spec("seed", 0, "seed of the noise, jitter and drop draws (same seed: same stream)", "", 0,
          2**62),
 )
@@ -109,6 +113,7 @@ class ReplaySettings:
     jitter_ms: float = 0.0
     drop_fraction: float = 0.0
     seed: int = 0
+    shoulder: str = "none"
 
     @property
     def exact(self) -> bool:
@@ -149,6 +154,7 @@ class ReplaySettings:
             jitter_ms=p.value("jitter_ms"),
             drop_fraction=p.value("drop_fraction"),
             seed=p.value("seed"),
+            shoulder=p.value("shoulder"),
         )
         p.distinct_topics(("output_topic", "marker_topic"))  # two types on one topic: rcl error
         return settings
@@ -172,9 +178,11 @@ class TrajectoryPublisher(Node):
         self.exit_code = OK
 
         # raw JointState, effort empty (and velocity too for a positions-only sensor)
-        self.out = OutputTemplate(JOINT_NAMES, effort=False, velocity=s.publish_velocity)
-        self._q = self.out.q
-        self._qd = self.out.qd if s.publish_velocity else np.zeros(len(JOINT_NAMES))
+        extra = () if s.shoulder == "none" else CONVENTIONS[s.shoulder].joint_names
+        self.out = OutputTemplate((*JOINT_NAMES, *extra), effort=False, velocity=s.publish_velocity)
+        n = len(JOINT_NAMES)
+        self._q = self.out.q[:n]  # the 20 joints; the shoulder's after them (views)
+        self._qd = self.out.qd[:n] if s.publish_velocity else np.zeros(n)
         self._rng = np.random.default_rng(s.seed)
         self._noise = np.zeros(len(JOINT_NAMES))
         self._noise_rad = float(np.radians(s.noise_deg))
@@ -300,6 +308,12 @@ class TrajectoryPublisher(Node):
         q = np.multiply(delta, s, out=self._q)
         q += start
         np.multiply(delta, ds / transition, out=self._qd)
+        cfg = self.settings
+        if cfg.shoulder != "none":  # the synthetic shoulder motion, from the movement's start
+            sq, sqd, _ = synthetic_shoulder_motion(cfg.shoulder, (t_ns - self._t0_ns) / 1e9)
+            self.out.q[20:] = sq[0]
+            if cfg.publish_velocity:
+                self.out.qd[20:] = sqd[0]
         if self._noise_rad:
             self._rng.standard_normal(out=self._noise)
             self._noise *= self._noise_rad

@@ -36,6 +36,9 @@ NON_FINITE_TORQUE = "non_finite_torque"  # finite inputs but absurd values overf
 TOO_MANY_NAMES = "too_many_names"  # more than MAX_NAMES names (bounded work and memory)
 STAMP_INVALID = "stamp_invalid"  # negative, or nanosec outside [0, 1e9)
 STAMP_IN_FUTURE = "stamp_in_future"  # more than FUTURE_TOLERANCE_S ahead of this node's clock
+NO_IMU = "no_imu"  # the shoulder comes from an Imu (imu_topic) and none has arrived yet
+#: a position far outside its joint's range (forearm_dynamics/ranges.py): degrees as radians
+ANGLE_OUT_OF_RANGE = "angle_out_of_range"
 
 #: Names a message may carry (the model's 20 and others, ignored). A real robot has tens;
 #: the limit bounds the per-message work and the name-list cache (16 lists) at ~1 MB.
@@ -58,6 +61,8 @@ REASONS = (
     TOO_MANY_NAMES,
     STAMP_INVALID,
     STAMP_IN_FUTURE,
+    NO_IMU,
+    ANGLE_OUT_OF_RANGE,
 )
 
 
@@ -82,11 +87,18 @@ class NameMatch:
 class NameMatcher:
     """Name list -> index map, cached per distinct list so the steady state costs one compare."""
 
-    def __init__(self, joint_names: Sequence[str], cache_size: int = 16, hold: bool = False):
+    def __init__(self, joint_names: Sequence[str], cache_size: int = 16, hold: bool = False,
+                 aliases: dict[str, str] | None = None, external: frozenset[str] = frozenset()):
         """hold: a model joint absent from a message is held (missing_joints: hold; the
-        caller writes its posture), instead of the message being refused (reject)."""
+        caller writes its posture), instead of the message being refused (reject).
+        aliases: other names a message may give a model joint (the shoulder's model-file
+        names: elv_angle -> shoulder_elevation_plane). external: model joints another input
+        supplies (the shoulder from an Imu): never required, and a message's value for
+        them is overwritten by the caller (their index points at slot 0)."""
         self.joint_names = tuple(joint_names)
         self.hold = hold
+        self.aliases = dict(aliases or {})
+        self.external = frozenset(external)
         self.held: np.ndarray | None = None  # the held joints of the last matched list
         self._cache: OrderedDict[tuple[str, ...], NameMatch] = OrderedDict()
         self._cache_size = cache_size
@@ -117,13 +129,14 @@ class NameMatcher:
             return NameMatch(None, Rejection(EMPTY, "message has no joint names"))
         slots: dict[str, int] = {}
         dups = []
-        for i, n in enumerate(names):
+        for i, given in enumerate(names):
+            n = self.aliases.get(given, given)
             if n in slots:
-                dups.append(n)
+                dups.append(n if n == given else f"{given} (= {n})")
             slots[n] = i
         if dups:
             return NameMatch(None, Rejection(DUPLICATE_NAME, f"names repeated: {sorted(set(dups))}"))
-        missing = [n for n in self.joint_names if n not in slots]
+        missing = [n for n in self.joint_names if n not in slots and n not in self.external]
         if missing and (not self.hold or len(missing) == len(self.joint_names)):
             hint = ("" if self.hold else "; a sensor that measures only some joints: "
                     "missing_joints:=hold holds the others at hold_posture.<joint>")
@@ -132,7 +145,8 @@ class NameMatcher:
                 + (" ..." if len(missing) > 5 else "") + hint
             ))
         index = np.array([slots.get(n, 0) for n in self.joint_names], dtype=np.intp)
-        held = np.array([i for i, n in enumerate(self.joint_names) if n not in slots], dtype=np.intp)
+        held = np.array([i for i, n in enumerate(self.joint_names)
+                         if n not in slots and n not in self.external], dtype=np.intp)
         return NameMatch(index, None, held if len(held) else None)
 
     def nonfinite_detail(self, field: str, values: np.ndarray) -> str:

@@ -14,6 +14,18 @@ compared with it at the same stamps:
   median over the DOFs that move is the headline;
 - delivery (loss, latency, rate), as with markers (check.delivery).
 
+Physical checks that do not depend on that reference (issue 30: degrees read as radians
+gave 1 490 N·m and PASSed, because the reference was computed from the same wrong angles):
+- units: the measured angles against the joints' ranges (forearm_dynamics/ranges.py): far
+  outside, or all within +-3 deg while moving, FAILs with "check units" (and no estimator
+  advice: the numbers below are then meaningless);
+- torque bound: |recorded torque| against the DOF group's bound (forearm_dynamics/bounds.py:
+  the largest gravity + inertia torque at human speed, from the model);
+- posture: the angles the node used (joint_torques position) against the measured ones,
+  RMS in degrees per moving DOF, gated (check.yaml markerless_posture_rms_deg_max);
+- still DOFs (measured angle peak-to-peak under check.yaml markerless_still_deg) are shown
+  but left out of the NRMSE verdict.
+
 The difference mixes the node's causal estimate (lag, noise) with the filter's smoothing,
 so it is gated generously: the worst moving DOF's NRMSE above check.yaml
 markerless_nrmse_max (0.5: an error of half the torque's own swing) fails, and the verdict
@@ -30,9 +42,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..analysis.errors import rmse
+from ..bounds import torque_bounds
 from ..estimation.offline import zero_phase
-from ..filtering import analysis_config
+from ..filtering import analysis_config, usable_cutoff
 from ..model_config import ModelChoice
+from ..ranges import check_recording
 from .delivery import Delivery, delivery, old_stamps_note
 from .recording import Recording
 from .thresholds import Thresholds
@@ -59,6 +73,12 @@ class ScoreReport:
     gate: float = float("nan")  # markerless_nrmse_max applied
     # what was compared, for the HTML report's plot: common stamps, recorded, reference
     compared: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    units: str | None = None  # the angles' range check refused them (one line: check units)
+    still: np.ndarray | None = None  # (J,) bool: the measured angle does not move
+    posture_rms_deg: np.ndarray | None = None  # (J,) node's angles vs measured, NaN if still
+    peak_torque: np.ndarray | None = None  # (J,) N·m, largest |recorded torque|
+    bound: np.ndarray | None = None  # (J,) N·m, the DOF group's human-speed bound
+    bound_text: str = ""
 
 
 def lag_by_xcorr(rec: np.ndarray, ref: np.ndarray, dt: float, max_lag_s: float = MAX_LAG_S) -> float:
@@ -102,13 +122,30 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
         warnings.append(f"{int((~keep).sum())} joint_states without every joint's position "
                         "(or with a repeated stamp) left out of the reference")
     s_t, s_q = s_t[keep], s_q[keep]
+    units = check_recording(s_q, names, source=f"{states.topic} positions")
+    report.units = units.refusal
+    warnings += units.warnings
+    if len(s_q):
+        report.still = np.degrees(np.ptp(s_q, axis=0)) < th.markerless_still_deg
+    bounds = torque_bounds(arm)
+    report.bound = np.array([bounds.of(n) for n in names])
+    report.bound_text = bounds.assumption
+    if torques is not None and len(torques) and torques.effort is not None:
+        with np.errstate(invalid="ignore"):
+            report.peak_torque = np.nanmax(np.abs(torques.effort), axis=0)
     if len(s_t) < 10:
         warnings.append(f"only {len(s_t)} usable joint_states: no reference computed")
         report.failures = _verdicts(report, th)
         return report
-    gap = max(int(10 * np.median(np.diff(s_t))), 100_000_000)
+    step = float(np.median(np.diff(s_t)))
+    gap = max(int(10 * step), 100_000_000)
+    # a cutoff this bag's rate can use (a 10 Hz bag: not the practice's 6 Hz), said when changed
+    cutoff, note = usable_cutoff(1e9 / step, cutoff_hz)
+    report.cutoff_hz = cutoff
+    if note is not None:
+        warnings.append(note)
     q, qd, qdd = zero_phase(s_t, s_q, cutoff, gap)
-    ref = arm.inverse_dynamics_batch(q, qd, qdd)
+    ref = arm.inverse_dynamics_batch(q, qd, qdd, check_ranges="off")  # units: judged above
     t_u, it = np.unique(torques.stamp_ns, return_index=True)
     common, ia, ib = np.intersect1d(s_t, t_u, assume_unique=True, return_indices=True)
     report.samples = len(common)
@@ -117,6 +154,10 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
         report.failures = _verdicts(report, th)
         return report
     r, x = ref[ia], torques.effort[it[ib]]
+    used = torques.position[it[ib]]
+    with np.errstate(invalid="ignore"):
+        rms = np.degrees(np.sqrt(np.nanmean((used - s_q[ia]) ** 2, axis=0)))
+    report.posture_rms_deg = np.where(report.still, np.nan, rms)
     report.compared = (common, x, r)
     report.duration_s = (common[-1] - common[0]) / 1e9
     err = rmse(x, r)
@@ -130,7 +171,8 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
     grid = common[0] + np.round(np.arange(0, common[-1] - common[0] + 1, dt * 1e9)).astype(np.int64)
     lags = np.full(len(names), np.nan)
     finite = np.isfinite(x).all(axis=1)
-    for j in np.flatnonzero(moving):
+    still = report.still if report.still is not None else np.zeros(len(names), bool)
+    for j in np.flatnonzero(moving & ~still):  # a held joint's lag says nothing of it
         xs = np.interp(grid, common[finite], x[finite, j])
         rs = np.interp(grid, common, r[:, j])
         lags[j] = lag_by_xcorr(xs, rs, dt) * 1e3
@@ -143,8 +185,12 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
 
 
 def worst_nrmse(report: ScoreReport) -> tuple[float, str]:
-    """(the largest NRMSE over the moving DOFs, its DOF); (nan, '') when none."""
+    """(the largest NRMSE over the moving DOFs, its DOF); (nan, '') when none. A DOF
+    moves when its torque swings (analysis.yaml ptp_floor_nm) AND its measured angle does
+    (check.yaml markerless_still_deg): a held joint is never the verdict."""
     x = np.asarray(report.nrmse, float)
+    if report.still is not None:
+        x = np.where(report.still, np.nan, x)
     if not np.isfinite(x).any():
         return float("nan"), ""
     j = int(np.nanargmax(x))
@@ -170,8 +216,28 @@ def notes(report: ScoreReport, th: Thresholds) -> list[str]:
 
 def _verdicts(report: ScoreReport, th: Thresholds) -> list[str]:
     out = []
+    if report.units:  # the angles are wrong: nothing below means anything, no estimator advice
+        out.append(report.units)
+    if report.peak_torque is not None and report.bound is not None:
+        over = np.flatnonzero(report.peak_torque > th.torque_bound_factor * report.bound)
+        if len(over):
+            j = int(over[np.argmax(report.peak_torque[over] / report.bound[over])])
+            out.append(f"{report.joint_names[j]} torque reaches {report.peak_torque[j]:.4g} N·m, above "
+                       f"{th.torque_bound_factor:g} x its group's bound {report.bound[j]:.3g} N·m "
+                       f"({len(over)} DOF(s); {report.bound_text}): "
+                       + ("check units" if report.units else
+                          "no human movement gives it: check units, or noise amplified by the "
+                          "estimator (estimator:=kalman)"))
+    if report.posture_rms_deg is not None and not report.units:
+        p = np.asarray(report.posture_rms_deg, float)
+        if np.isfinite(p).any() and np.nanmax(p) > th.markerless_posture_rms_deg_max:
+            j = int(np.nanargmax(p))
+            out.append(f"posture: the angles the node used differ from the measured ones by "
+                       f"{p[j]:.2f} deg RMS on {report.joint_names[j]} > "
+                       f"{th.markerless_posture_rms_deg_max:g} deg (check.yaml "
+                       "markerless_posture_rms_deg_max): the estimate does not follow the arm")
     worst, dof = worst_nrmse(report)
-    if np.isfinite(worst) and worst > th.markerless_nrmse_max:
+    if not report.units and np.isfinite(worst) and worst > th.markerless_nrmse_max:
         out.append(f"NRMSE against the offline practice {100 * worst:.0f} % on {dof} > "
                    f"{100 * th.markerless_nrmse_max:g} % (check.yaml markerless_nrmse_max): "
                    + advice())
@@ -196,10 +262,21 @@ def format_score(report: ScoreReport, bag_info) -> list[str]:
              *(f"warning: {w}" for w in report.warnings),
              (f"reference: joint_states positions low-passed at {report.cutoff_hz:g} Hz zero-phase, "
              "derivatives of the filtered signal, inverse dynamics"),
-             f"{'DOF':<22} {'RMSE N·m':>10} {'NRMSE %':>8} {'lag ms':>8}"]
+             (f"{'DOF':<22} {'RMSE N·m':>10} {'NRMSE %':>8} {'lag ms':>8} {'posture°':>9} "
+             f"{'|τ| max':>9} {'bound':>7}")]
+    nan = np.full(len(report.joint_names), np.nan)
+    posture = nan if report.posture_rms_deg is None else report.posture_rms_deg
+    peak = nan if report.peak_torque is None else report.peak_torque
+    bound = nan if report.bound is None else report.bound
     for j, n in enumerate(report.joint_names):
+        still = report.still is not None and report.still[j]
         lines.append(f"{n:<22} {_num(report.rmse[j], '.4f'):>10} {_num(100 * report.nrmse[j], '.2f'):>8} "
-                     f"{_num(report.lag_ms[j], '.2f'):>8}")
+                     f"{_num(report.lag_ms[j], '.2f'):>8} {_num(posture[j], '.3f'):>9} "
+                     f"{_num(peak[j], '.4g'):>9} {_num(bound[j], '.3g'):>7}" + ("  still" if still else ""))
+    if report.still is not None:
+        lines.append(f"still: measured angle peak-to-peak under the check.yaml markerless_still_deg "
+                     f"({int(report.still.sum())} DOF(s)): shown, left out of the verdict; posture° = "
+                     "RMS of the node's angles - the measured ones; bound: " + report.bound_text)
     lines.append(f"torque lag (median over {int(np.isfinite(report.lag_ms).sum())} moving DOFs): "
                  f"{_num(report.lag_median_ms, '.2f')} ms; {report.left_out} DOF(s) left out "
                  "(peak-to-peak under the floor)")
@@ -238,4 +315,13 @@ def score_dict(report: ScoreReport) -> dict:
                      "latency_ms": d.latency_ms, "rate_hz": d.rate_hz},
         "warnings": report.warnings, "failures": report.failures, "notes": report.notes,
         "nrmse_gate": report.gate,
+        "units": report.units,
+        "still": None if report.still is None else [n for n, x in zip(names, report.still, strict=True) if x],
+        "posture_rms_deg": None if report.posture_rms_deg is None else
+        {n: clean(v) for n, v in zip(names, report.posture_rms_deg, strict=True)},
+        "torque_peak_nm": None if report.peak_torque is None else
+        {n: clean(v) for n, v in zip(names, report.peak_torque, strict=True)},
+        "torque_bound_nm": None if report.bound is None else
+        {n: clean(v) for n, v in zip(names, report.bound, strict=True)},
+        "torque_bound_assumption": report.bound_text,
     }

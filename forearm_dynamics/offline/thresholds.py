@@ -30,6 +30,9 @@ class Thresholds:
     tail_grace_s: float = 0.1
     markerless_nrmse_max: float = 0.5
     old_stamps_latency_s: float = 1.0
+    markerless_still_deg: float = 2.0
+    markerless_posture_rms_deg_max: float = 5.0
+    torque_bound_factor: float = 1.0
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> Thresholds:

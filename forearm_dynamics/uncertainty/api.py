@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..estimation import make_estimator
+from ..estimation.stamps import resets
 from .torque_std import TorqueStd
 
 
@@ -41,10 +42,11 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
                               settings: dict | None = None, lag: bool = True, model: bool = True,
                               covariance: str = "noise", gain: float | None = None,
                               tau_s: float | None = None, t_in_ns: bool = False,
-                              max_gap_s: float = 0.1, subject: str = "none",
+                              max_gap_s: float = 0.0, subject: str = "none",
                               subject_measured=()) -> TorquesWithStd:
     """τ and σ for samples at t (s, increasing; ns with t_in_ns) of positions q (N, n) in
-    arm.joint_names order, velocities qd (N, n) or None. A stamp step over max_gap_s resets
+    arm.joint_names order, velocities qd (N, n) or None. The node's stamp rule (estimation/stamps.py;
+    max_gap_s 0 = adaptive, the node's default) resets
     the estimator (its history, not its noise belief) as bag_torques and the node do.
     ValueError for an estimator without a covariance (NoCovariance), bad shapes or
     non-increasing stamps. subject "ansur" adds the spread of the segment parameters at the
@@ -70,20 +72,30 @@ def inverse_dynamics_with_std(arm, t, q, qd=None, *, estimator: str = "kalman",
     warm = np.zeros(N, bool)
     known = np.zeros(N, bool)
     vel = qd is not None
-    gap = round(max_gap_s * 1e9)
+    # the node's stamp rule (estimation/stamps.py) on the steps (times here may be <= 0)
+    _keep, reset = resets(t_ns - t_ns[0] + 1 if N else t_ns, max_gap_s)
+    row = {int(x): k for k, x in enumerate(t_ns)}
     for k in range(N):
-        if k and not 0 < t_ns[k] - t_ns[k - 1] <= gap:
+        if reset[k]:
             est.reset()
             ts.reset()
-        warm[k] = est.update(int(t_ns[k]), q[k], qd[k] if vel else None)
-        out["q"][k], out["qd"][k], out["qdd"][k] = est.q, est.qd, est.qdd
-        out["tau"][k] = arm.inverse_dynamics(est.q, est.qd, est.qdd)  # the node's pin.rnea
-        # ts.update on every sample (it keeps the jerk read current); as the node, no σ while
-        # the state warms up
-        if ts.update(int(t_ns[k]), vel) and warm[k]:
-            known[k] = True
-            out["std"][k] = ts.std
-            out["var_est"][k], out["var_lag"][k] = ts.prop.var_est, ts.prop.var_lag
-            out["var_subject"][k] = ts.prop.var_subject
+        w = est.update(int(t_ns[k]), q[k], qd[k] if vel else None)
+        if est.stamp_ns is None:  # a delay: this sample's estimate comes later
+            continue
+        i = row[est.stamp_ns]  # with a delay, the row of the sample it estimates
+        warm[i] = w
+        out["q"][i], out["qd"][i], out["qdd"][i] = est.q, est.qd, est.qdd
+        out["tau"][i] = arm.inverse_dynamics(est.q, est.qd, est.qdd)  # the node's pin.rnea
+        # ts.update after every output, as the node; no σ while the state warms up
+        if ts.update(est.stamp_ns, vel) and w:
+            known[i] = True
+            out["std"][i] = ts.std
+            out["var_est"][i], out["var_lag"][i] = ts.prop.var_est, ts.prop.var_lag
+            out["var_subject"][i] = ts.prop.var_subject
+    for stamp, x in est.drain():  # the last delay_s: estimates the node outputs later
+        i = row[stamp]
+        warm[i] = True
+        out["q"][i], out["qd"][i], out["qdd"][i] = x
+        out["tau"][i] = arm.inverse_dynamics(x[0], x[1], x[2])
     return TorquesWithStd(t_ns=t_ns, warm=warm, known=known, var_model=ts.model_var.copy(),
                           parts=ts.parts(), **out)

@@ -83,6 +83,14 @@ class TorqueHarness:
             assert time.monotonic() < deadline and self.proc.running(), self.proc.output()
             self.pub.publish(joint_state(self.stamp(), posture, np.zeros(20)))
             self.peer.spin_for(0.1)
+        # then one more 1 ms after the last one sent (not wall-clock spaced, as the samples
+        # above are with follow_wall_clock): the node knows the stream's interval (1 ms), as a
+        # real stream gives it. Else a test's first pause is the stream's first step (or 5 x a
+        # ~0.1 s connect step), which the stamp rule lets continue (estimation/stamps.py).
+        self.t_ns += MS  # 1 ms after the last sent (after discovery: received, in order)
+        self.pub.publish(joint_state(self.t_ns, posture, np.zeros(20)))
+        ok = self.peer.spin_until(lambda: any(stamp_of(r) == self.t_ns for r in self.replies), 30)
+        assert ok, self.proc.output()
 
     def stamp(self, dt_ns: int = MS) -> int:
         """The next stamp: dt after the previous one (and never behind the wall clock if

@@ -1,0 +1,243 @@
+"""Muscle layer benchmark (issue 31): cost, delivery, and agreement with OpenSim.
+
+    python -m benchmarks.muscle_node [--quick] [--out benchmarks/muscle_node.json]
+
+Sections (each states the load average; 2 cores):
+- `solve`: in process, no ROS: the 65 movements at 1 kHz (torques by Pinocchio from the exact
+  q, q̇, q̈), per sample: geometry (surrogate moment arms, lengths, speeds), the QP alone
+  (MuscleSolution.solve_time) and both; p50/p99 in µs.
+- `chain`: trajectory_publisher -> torque_node -> muscle_node -> receiver at 1 kHz over the
+  movements (real processes, loopback DDS): muscle_forces received (unique stamps) vs
+  samples sent (lost), muscle_node's own callback time and QP time from its /diagnostics
+  (median over the 1 s periods of their p50/p99), muscle_forces latency (receive time - the
+  joint_states stamp), joint_torques latency in the same run.
+- `torque_path`: the same replay through null_echo_node and torque_node alone (the torque
+  benchmark's variants): the torque node's latency p50 as a ratio to null_echo_node's, without
+  and (chain) with muscle_node subscribed: "torque-path latency unchanged".
+- `opensim`: our per-sample QP against the cached OpenSim StaticOptimization reference
+  (muscle_validation/reference.py; `make muscle-reference`) and against the exact-geometry
+  solve (MuJoCo tendon Jacobians + BVLS), per muscle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.procstat import Sampler
+from forearm_dynamics.dynamics import build_model
+from forearm_dynamics.movements import get_movement, movement_library
+from forearm_dynamics.muscle_validation.opensim_so import model_digest, our_movement
+from forearm_dynamics.muscle_validation.reference import (
+    REFERENCE_FILE,
+    accepted_frames,
+    figures,
+    load_reference,
+)
+from forearm_dynamics.muscles import StaticOptimizer, load_muscle_model
+from forearm_dynamics.processes import Child, ros_env
+
+from . import module_env
+from .stats import claim_domain_arg, loadavg, machine_info, percentiles, write_json
+from .torque_path import Variant, _expected, _figures, _sent_by_publisher, run_variant
+
+OUT = Path(__file__).with_name("muscle_node.json")
+
+
+def solve_section(movements: list[int]) -> dict:
+    mm = load_muscle_model()
+    arm = build_model("segmented", 50)
+    so = StaticOptimizer(mm)
+    geo, qp, whole = [], [], []
+    residual, infeasible = 0.0, 0
+    load0 = loadavg()
+    for mid in movements:
+        mv = get_movement(mid)
+        q, qd, qdd = mv.evaluate(mv.sample_times(1000.0))
+        tau = arm.inverse_dynamics_batch(q, qd, qdd)
+        so.reset()
+        for k in range(len(q)):
+            t0 = time.perf_counter_ns()
+            R, L, V = mm.geometry(q[k], qd[k])
+            t1 = time.perf_counter_ns()
+            s = so.solve_geometry(R, L, V, tau[k])
+            t2 = time.perf_counter_ns()
+            geo.append(t1 - t0)
+            whole.append(t2 - t0)
+            qp.append(s.solve_time * 1e9)
+            residual = max(residual, s.residual)
+            infeasible += s.infeasible
+    return {"samples": len(qp), "movements": len(movements), "muscles": mm.n,
+            "geometry_us": percentiles(geo, 1e-3), "qp_us": percentiles(qp, 1e-3),
+            "geometry_plus_qp_us": percentiles(whole, 1e-3), "max_residual_nm": residual,
+            "infeasible_samples": int(infeasible), "loadavg": [load0, loadavg()]}
+
+
+def _diag_stats(diag: list[dict], t0: float, t1: float) -> dict:
+    rows = [d["values"] for d in diag if t0 <= d["t"] <= t1 + 1.5
+            and float(d["values"].get("output_rate_hz", 0)) > 0
+            and d["values"].get("compute_us_p50", "nan") != "nan"]
+    if not rows:
+        return {"periods": 0}
+    out = {"periods": len(rows)}
+    for key in ("compute_us_p50", "compute_us_p99", "solve_us_p50", "solve_us_p99",
+                "publish_us_p50", "own_us_p50"):
+        vals = np.array([float(r[key]) for r in rows if key in r])
+        if len(vals):
+            out[key] = float(np.median(vals))
+            out[key + "_worst_period"] = float(vals.max())
+    last = rows[-1]
+    for key in ("reserve_use_total", "infeasible_total", "solver_failed_total", "rejected_total",
+                "received_total", "processed_total"):
+        if key in last:
+            out[key] = int(last[key])
+    return out
+
+
+def run_chain(movements: list[int], domain: int, work: Path, start_delay: float = 5.0) -> dict:
+    """trajectory_publisher -> torque_node -> muscle_node -> receiver (muscle_forces; also
+    joint_torques)."""
+    logs = work / "chain"
+    logs.mkdir(parents=True, exist_ok=True)
+    env = ros_env(domain, logs)
+    rx_path = logs / "rx.npz"
+    children: list[Child] = []
+    try:
+        torque = Child.script("torque_node", ["-p", "diagnostics_period:=1.0"], env, logs)
+        children.append(torque)
+        muscle = Child.script("muscle_node", ["-p", "diagnostics_period:=1.0"], env, logs)
+        children.append(muscle)
+        rx = Child.module("receiver", "benchmarks.receiver",
+                          ["--topic", "muscle_forces", "--out", str(rx_path), "--diag-prefix",
+                           "muscle_node", "--also", "joint_torques"], module_env(env), logs)
+        children.append(rx)
+        for c, text in ((torque, "joint_torques ("), (muscle, "muscle_forces"),
+                        (rx, "receiver: matched")):
+            if not c.wait_for(text, 120):
+                raise RuntimeError(f"{c.name} did not start:\n{c.text()[-2000:]}")
+        with Sampler({"torque_node": torque.pid, "muscle_node": muscle.pid,
+                      "receiver": rx.pid}) as sampler:
+            pub_args = ["-p", f"movements:={movements}", "-p", f"start_delay:={start_delay}",
+                        "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=60.0"]
+            pub_started = time.time()
+            pub = Child.script("trajectory_publisher", pub_args, env, logs)
+            children.append(pub)
+            sampler.add("publisher", pub.pid)
+            code = pub.wait(start_delay + 1.5 * len(movements) * 3 + 60)
+            if code != 0:
+                raise RuntimeError(f"trajectory_publisher exited {code}:\n{pub.text()[-2000:]}")
+            time.sleep(1.0)  # the last answers in flight
+            sampler.sample()
+        codes = {c.name: c.stop() for c in reversed(children)}
+    finally:
+        for c in children:
+            c.stop()
+    sent, _ = _sent_by_publisher(pub.text())
+    data = np.load(rx_path)
+    diag = json.loads(rx_path.with_suffix(".diag.json").read_text())
+    expected = _expected(movements)
+    res = _figures(data["recv_ns"], data["stamp_ns"], sent if sent is not None else expected,
+                   sampler, diag, pub_started)
+    res.pop("callback_us", None)
+    t0, t1 = data["recv_ns"][0] / 1e9, data["recv_ns"][-1] / 1e9
+    tq_lat = (data["also_recv_ns"] - data["also_stamp_ns"]) / 1e6
+    res.update({"expected": expected, "sent": sent, "exit_codes": codes,
+                "muscle_node_diagnostics": _diag_stats(diag, t0, t1),
+                "joint_torques": {"unique": int(np.unique(data["also_stamp_ns"]).size),
+                                  "latency_ms": percentiles(tq_lat)},
+                "muscle_node_log_summary": next((line for line in muscle.text().splitlines()
+                                                 if "summary:" in line), None)})
+    return res
+
+
+def torque_path_section(movements: list[int], domain: int, work: Path, chain: dict) -> dict:
+    out = {}
+    for v in (Variant("null_echo_node", node="null_echo_node"), Variant("torque_node")):
+        r = run_variant(v, movements, domain, work)
+        out[v.name] = {"latency_ms_p50": r["latency_ms"]["p50"],
+                       "latency_ms_p99": r["latency_ms"]["p99"], "lost": r["lost"],
+                       "callback_us": r["callback_us"]}
+    base = out["null_echo_node"]["latency_ms_p50"]
+    out["ratio_torque_alone"] = out["torque_node"]["latency_ms_p50"] / base
+    out["ratio_torque_with_muscle_node"] = chain["joint_torques"]["latency_ms"]["p50"] / base
+    out["note"] = ("torque_node's joint_torques latency p50 / null_echo_node's in the same "
+                   "session; with muscle_node: the chain run's joint_torques latency")
+    return out
+
+
+def opensim_section() -> dict:
+    if not REFERENCE_FILE.is_file():
+        return {"error": f"{REFERENCE_FILE} missing: make muscle-reference"}
+    ref = load_reference()
+    mm = load_muscle_model()
+    arm = build_model("segmented", 50)
+    stale = ref.meta.get("muscle_model_sha256") != model_digest(mm)
+    A, F, Q, T = [], [], [], []
+    for i, mid in enumerate(ref.movement_ids):
+        sl = ref.frames(i)
+        mv = get_movement(int(mid))
+        ser, tau = our_movement(arm, mm, mv, ref.times[sl])
+        A.append(ser.activations)
+        F.append(ser.forces)
+        Q.append(mv.evaluate(ref.times[sl])[0])
+        T.append(tau)
+    A, F, Q, T = map(np.vstack, (A, F, Q, T))
+    keep, rejected = accepted_frames(mm, Q, T, ref.forces, ref.reserves)
+    f = figures(mm, A, ref.activations, keep, rejected, F, ref.forces)
+    out = {"stale_reference": stale, "movements": [int(m) for m in ref.movement_ids],
+           "frames": len(A), "reference_meta": ref.meta, "summary": f.summary(),
+           "per_muscle": [f.row(i) for i in range(mm.n)]}
+    if ref.exact_activations is not None:
+        g = figures(mm, A, ref.exact_activations, np.ones(len(A), bool), {})
+        out["exact_geometry"] = {"summary": g.summary(), "per_muscle": [g.row(i) for i in range(mm.n)]}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="benchmarks.muscle_node", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--quick", action="store_true", help="5 movements instead of 65")
+    ap.add_argument("--sections", default="solve,chain,torque_path,opensim")
+    ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID") or 0) or 76)
+    args = ap.parse_args(argv)
+    sections = set(args.sections.split(","))
+    movements = [m.id for m in movement_library()]
+    if args.quick:
+        movements = movements[::13]
+    # sections run apart (e.g. opensim once the reference exists) merge into one file
+    out: dict = json.loads(args.out.read_text()) if args.out.is_file() else {}
+    out.update({"machine": machine_info(), f"loadavg_start_{'_'.join(sorted(sections))}": loadavg(),
+                f"command_{'_'.join(sorted(sections))}":
+                "python -m benchmarks.muscle_node " + " ".join(argv or sys.argv[1:])})
+    if "solve" in sections:
+        out["solve"] = solve_section(movements)
+        print(json.dumps(out["solve"], indent=1), file=sys.stderr)
+    if "opensim" in sections:
+        out["opensim"] = opensim_section()
+        print(json.dumps(out["opensim"].get("summary"), indent=1), file=sys.stderr)
+    if sections & {"chain", "torque_path"}:
+        lease = claim_domain_arg(ap, args.domain, "benchmarks.muscle_node")
+        with tempfile.TemporaryDirectory(prefix="bench_muscle_") as tmp:
+            out["domain_id"] = lease.domain
+            chain = run_chain(movements, out["domain_id"], Path(tmp))
+            out["chain"] = chain
+            print(json.dumps({k: chain[k] for k in ("sent", "unique", "lost",
+                                                    "muscle_node_diagnostics")}, indent=1),
+                  file=sys.stderr)
+            if "torque_path" in sections:
+                out["torque_path"] = torque_path_section(movements, out["domain_id"], Path(tmp), chain)
+    out[f"loadavg_end_{'_'.join(sorted(sections))}"] = loadavg()
+    write_json(args.out, out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,415 @@
+"""Derive the shipped muscle model from MyoSuite's MyoArm (MuJoCo): parameters and surrogates.
+
+    pip install -e '.[muscles-fit]'          # mujoco + myo-sim (Apache-2.0), fitting only
+    python -m forearm_dynamics.muscles.fit   # writes forearm_dynamics/data/muscles_myoarm.json
+
+Why MyoArm: it is the only source with the forearm and hand muscles' paths under a licence
+our BSD-3 package can carry (Apache-2.0; MoBL-ARMS is non-commercial). What the script does:
+
+1. Loads `myo_sim.load_model("myoarm_r")`, holds every shoulder joint at 0 (our humerus is
+   fixed in the world, arm at the side) and the four MCP abductions at 0 (we have none).
+2. Maps the source's joints onto ours by coordinate value and sign (`JOINT_MAP`): our angle
+   = sign × the source's angle; the sign is the one that gives each muscle its anatomical
+   action (checked by `check_signs`: PT pronates, ECU deviates ulnarly, FPL flexes the thumb
+   ...). A moment arm about our joint is sign × the source's.
+3. Parameters: max isometric force = MuJoCo's `force`; MuJoCo's normalised muscle has no
+   optimal fibre length, tendon slack or pennation, so they follow MuJoCo's own definition
+   (engine docs, `mj_setLengthRange` + muscle gain): L0 = (lengthrange[1] − lengthrange[0]) /
+   (range[1] − range[0]), LTs = lengthrange[0] − range[0]·L0 (where that is negative, a
+   fibre longer than its path: LTs = 0, L0 = lengthrange[1] / range[1]), pennation 0 (rigid tendon,
+   fibre along the path); max contraction velocity 10 L0/s (DeGroote-Fregly's curves are
+   scaled for it; MyoArm's forearm class keeps MuJoCo's default vmax 1.5 of its own curve).
+4. Samples postures uniformly over our joints' ranges (README table) and fits, per muscle,
+   polynomials of the joints it crosses (total degree chosen per muscle, the smallest that
+   reaches 1 mm on held-out samples, at most MAX_DEGREE) to the source's own length
+   (`ten_length`) and moment arms (−`ten_J`, MuJoCo's analytic tendon Jacobian, not a
+   finite difference of the length).
+5. Path-wrapping artefacts: 1° sweeps of each (muscle, joint) pair compare the length's step
+   with the moment arm's integral; a step off by more than JUMP_TOL is a jump (the path
+   switched sides of a wrap). Fitting samples whose residual is an outlier (> OUTLIER_K ×
+   robust σ and > 1 mm) are excluded and refitted (at most 2 % per muscle); both are reported.
+6. Errors per (muscle, joint) pair on held-out samples (RMS, max) are written into the file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..description import JOINT_NAMES, load_description
+
+#: our joint -> (MyoArm joint, sign): our angle = sign * MyoArm's angle.
+JOINT_MAP: dict[str, tuple[str, int]] = {
+    "elbow_flexion": ("elbow_flexion_r", 1),
+    "pro_sup": ("pro_sup_r", 1),  # pronation positive in both (PT, PQ positive)
+    "wrist_flexion": ("flexion_r", 1),
+    "wrist_deviation": ("deviation_r", -1),  # MyoArm: radial positive (ECU, FCU negative)
+    "thumb_cmc_flexion": ("cmc_flexion", -1),  # MyoArm: extension positive (EPB, EPL +)
+    "thumb_cmc_abduction": ("cmc_abduction", 1),  # APL positive, EPL negative
+    "thumb_mcp_flexion": ("mp_flexion_r", -1),  # MyoArm: FPL negative
+    "thumb_ip_flexion": ("ip_flexion_r", -1),
+    "index_mcp_flexion": ("mcp2_flexion_r", 1),
+    "index_pip_flexion": ("pm2_flexion_r", 1),
+    "index_dip_flexion": ("md2_flexion_r", 1),
+    "middle_mcp_flexion": ("mcp3_flexion_r", 1),
+    "middle_pip_flexion": ("pm3_flexion_r", 1),
+    "middle_dip_flexion": ("md3_flexion", 1),
+    "ring_mcp_flexion": ("mcp4_flexion_r", 1),
+    "ring_pip_flexion": ("pm4_flexion", 1),
+    "ring_dip_flexion": ("md4_flexion_r", 1),
+    "little_mcp_flexion": ("mcp5_flexion_r", 1),
+    "little_pip_flexion": ("pm5_flexion_r", 1),
+    "little_dip_flexion": ("md5_flexion_r", 1),
+}
+
+#: Anatomical actions the mapping must reproduce (muscle, our joint, sign of moment arm).
+SIGN_CHECKS = (
+    ("BRA", "elbow_flexion", 1), ("TRIlat", "elbow_flexion", -1),
+    ("PT", "pro_sup", 1), ("PQ", "pro_sup", 1), ("SUP", "pro_sup", -1),
+    ("FCR", "wrist_flexion", 1), ("ECRB", "wrist_flexion", -1),
+    ("ECU", "wrist_deviation", 1), ("FCU", "wrist_deviation", 1), ("ECRL", "wrist_deviation", -1),
+    ("FPL", "thumb_ip_flexion", 1), ("EPL", "thumb_ip_flexion", -1),
+    ("FPL", "thumb_mcp_flexion", 1), ("EPB", "thumb_mcp_flexion", -1),
+    ("OP", "thumb_cmc_flexion", 1), ("EPB", "thumb_cmc_flexion", -1),
+    ("EPL", "thumb_cmc_abduction", -1),  # APL: ~0 mm mid-range, sign not anatomical proof
+    ("FDP2", "index_dip_flexion", 1), ("EDC3", "middle_mcp_flexion", -1),
+)
+
+#: Shoulder-only muscles of MyoArm: they cross no joint of ours.
+SHOULDER_ONLY = ("DELT1", "DELT2", "DELT3", "SUPSP", "INFSP", "SUBSC", "TMIN", "TMAJ",
+                 "PECM1", "PECM2", "PECM3", "LAT1", "LAT2", "LAT3", "CORB")
+
+TARGET_M = 1e-3  # the issue's target: RMS <= 1 mm per (muscle, DOF) pair
+MAX_DEGREE = 5
+MAX_TERMS = 462
+JUMP_TOL = 5e-4  # m: length step not explained by the moment arm over a 1° step
+OUTLIER_K = 6.0
+N_FIT = 20000
+N_TEST = 4000
+DEFAULT_OUT = Path(__file__).resolve().parent.parent / "data" / "muscles_myoarm.json"
+
+
+class MyoArm:
+    """MuJoCo MyoArm at our joints: lengths and moment arms per muscle (tendon)."""
+
+    def __init__(self, xml: Path | None = None):
+        import mujoco
+
+        if xml is None:
+            import myo_sim
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self.m = myo_sim.load_model("myoarm_r")
+            self.version = {"myo_sim": myo_sim.__version__, "mujoco": mujoco.__version__}
+        else:  # a user's MuJoCo model with MyoArm's joint and muscle names
+            self.m = mujoco.MjModel.from_xml_path(str(xml))
+            self.version = {"file": str(xml), "mujoco": mujoco.__version__}
+        self.mujoco = mujoco
+        m = self.m
+        self.d = mujoco.MjData(m)
+        jn = [m.joint(j).name for j in range(m.njnt)]
+        self.qadr = np.array([m.jnt_qposadr[jn.index(JOINT_MAP[n][0])] for n in JOINT_NAMES])
+        self.dofadr = np.array([m.jnt_dofadr[jn.index(JOINT_MAP[n][0])] for n in JOINT_NAMES])
+        self.sign = np.array([JOINT_MAP[n][1] for n in JOINT_NAMES], float)
+        names = [m.actuator(a).name for a in range(m.nu)]
+        self.actuators = [a for a, n in enumerate(names) if n not in SHOULDER_ONLY]
+        self.names = [names[a] for a in self.actuators]
+        self.tendons = np.array([m.actuator_trnid[a, 0] for a in self.actuators])
+        self._J = np.zeros((m.ntendon, m.nv))
+
+    def evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """q (N, 20) ours -> lengths (N, n) m, moment arms (N, n, 20) m (our signs)."""
+        mj, m, d = self.mujoco, self.m, self.d
+        q = np.atleast_2d(q)
+        L = np.empty((len(q), len(self.names)))
+        R = np.empty((len(q), len(self.names), 20))
+        for k, qk in enumerate(q):
+            d.qpos[:] = 0.0
+            d.qpos[self.qadr] = self.sign * qk
+            mj.mj_kinematics(m, d)
+            mj.mj_comPos(m, d)
+            mj.mj_tendon(m, d)
+            mj.mju_sparse2dense(self._J, d.ten_J, m.ten_J_rownnz, m.ten_J_rowadr, m.ten_J_colind)
+            L[k] = d.ten_length[self.tendons]
+            R[k] = -self._J[self.tendons][:, self.dofadr] * self.sign
+        return L, R
+
+    def parameters(self, a_index: int) -> dict[str, float]:
+        m = self.m
+        a = self.actuators[a_index]
+        g = m.actuator_gainprm[a]
+        lo, hi = m.actuator_lengthrange[a]
+        l0 = (hi - lo) / (g[1] - g[0])
+        lts = lo - g[0] * l0
+        if lts < 0.0:  # a fibre longer than its whole path (PQ, OP, RI3): no tendon instead,
+            lts, l0 = 0.0, hi / g[1]  # the longest path puts the fibre at range[1]
+        return {
+            "max_isometric_force": float(g[2]),
+            "optimal_fiber_length": float(l0),
+            "tendon_slack_length": float(lts),
+            "pennation_at_optimal": 0.0,
+            "max_contraction_velocity": 10.0,
+        }
+
+
+def joint_box() -> tuple[np.ndarray, np.ndarray]:
+    """Our joints' ranges (rad, README table / config/model.yaml)."""
+    ranges = load_description().ranges
+    lo = np.array([ranges[n][0] for n in JOINT_NAMES], float)
+    hi = np.array([ranges[n][1] for n in JOINT_NAMES], float)
+    return lo, hi
+
+
+def exponents(n_vars: int, degree: int) -> np.ndarray:
+    """All monomials of total degree <= degree in n_vars variables, (K, n_vars) ints."""
+    out = [e for d in range(degree + 1)
+           for e in itertools.product(range(d + 1), repeat=n_vars) if sum(e) == d]
+    return np.array(out, int).reshape(-1, n_vars)
+
+
+def design(x: np.ndarray, exps: np.ndarray) -> np.ndarray:
+    return np.prod(x[:, None, :] ** exps[None, :, :], axis=2)
+
+
+def find_spans(src: MyoArm, lo, hi, rng) -> list[list[int]]:
+    q = rng.uniform(lo, hi, size=(40, 20))
+    _, R = src.evaluate(q)
+    return [list(np.nonzero(np.abs(R[:, i, :]).max(axis=0) > 1e-7)[0]) for i in range(R.shape[1])]
+
+
+def check_signs(src: MyoArm, lo, hi) -> list[str]:
+    mid = 0.5 * (lo + hi)
+    _, R = src.evaluate(mid[None])
+    bad = []
+    for muscle, joint, sgn in SIGN_CHECKS:
+        r = R[0, src.names.index(muscle), JOINT_NAMES.index(joint)]
+        if np.sign(r) != sgn:
+            bad.append(f"{muscle} about {joint}: {r * 1e3:+.2f} mm, expected sign {sgn:+d}")
+    return bad
+
+
+def find_jumps(src: MyoArm, spans, lo, hi, rng, n_base: int = 6) -> list[dict]:
+    """1° sweeps: length steps the moment arm does not explain (wrapping artefacts)."""
+    found = []
+    step = math.radians(1.0)
+    for j in range(20):
+        users = [i for i, s in enumerate(spans) if j in s]
+        if not users:
+            continue
+        grid = np.arange(lo[j], hi[j] + 1e-12, step)
+        for _ in range(n_base):
+            base = rng.uniform(lo, hi)
+            q = np.repeat(base[None], len(grid), axis=0)
+            q[:, j] = grid
+            L, R = src.evaluate(q)
+            for i in users:
+                dl = np.diff(L[:, i])
+                pred = -0.5 * (R[1:, i, j] + R[:-1, i, j]) * np.diff(grid)
+                bad = np.abs(dl - pred) > JUMP_TOL
+                for k in np.nonzero(bad)[0]:
+                    found.append({"muscle": src.names[i], "joint": JOINT_NAMES[j],
+                                  "at_deg": round(math.degrees(grid[k]), 1),
+                                  "length_step_mm": round(float(dl[k]) * 1e3, 2),
+                                  "explained_mm": round(float(pred[k]) * 1e3, 2)})
+    return found
+
+
+def fit_muscle(xf, Lf, Rf, xt, Lt, Rt, span) -> dict:
+    """Smallest degree reaching TARGET_M on held-out samples; outliers excluded, reported."""
+    best = None
+    for degree in range(1, MAX_DEGREE + 1):
+        exps = exponents(len(span), degree)
+        if len(exps) > MAX_TERMS:
+            break
+        A = design(xf[:, span], exps)
+        Y = np.column_stack([Lf, Rf[:, span]])
+        keep = np.ones(len(A), bool)
+        for _ in range(3):
+            coef, *_ = np.linalg.lstsq(A[keep], Y[keep], rcond=None)
+            res = np.abs(A @ coef - Y)
+            sigma = 1.4826 * np.median(res, axis=0) + 1e-12
+            out = ((res > OUTLIER_K * sigma) & (res > TARGET_M)).any(axis=1)
+            if out.sum() > 0.02 * len(A) or np.array_equal(~out, keep):
+                break
+            keep = ~out
+        At = design(xt[:, span], exps)
+        Yt = np.column_stack([Lt, Rt[:, span]])
+        err = At @ coef - Yt
+        rms = np.sqrt(np.mean(err ** 2, axis=0))
+        best = {"degree": degree, "exps": exps, "coef": coef, "rms": rms,
+                "max": np.abs(err).max(axis=0), "excluded": int((~keep).sum())}
+        if rms.max() <= TARGET_M:
+            break
+    return best
+
+
+def movement_box() -> tuple[np.ndarray, np.ndarray]:
+    """The box the library's 65 movements stay in (each joint's min and max)."""
+    from ..movements import movement_library
+
+    qs = [mv.evaluate(mv.sample_times(200))[0] for mv in movement_library()]
+    q = np.concatenate(qs)
+    return q.min(axis=0), q.max(axis=0)
+
+
+def envelope_errors(src, muscles, center, half, rng, n: int = 2000) -> None:
+    """Add each pair's RMS over the movements' box (held-out samples) to the fit record."""
+    lo, hi = movement_box()
+    q = rng.uniform(lo, hi, size=(n, 20))
+    L, R = src.evaluate(q)
+    x = np.clip((q - center) / half, -1, 1)
+    for i, mus in enumerate(muscles):
+        span = [JOINT_NAMES.index(j) for j in mus["spans"]]
+        A = design(x[:, span], np.asarray(mus["surrogate"]["exponents"]))
+        mus["fit"]["movement_box_length_rms_mm"] = round(
+            float(np.sqrt(np.mean((A @ mus["surrogate"]["length"] - L[:, i]) ** 2))) * 1e3, 4)
+        mus["fit"]["movement_box_moment_arm_rms_mm"] = {
+            j: round(float(np.sqrt(np.mean((A @ mus["surrogate"]["moment_arms"][j]
+                                            - R[:, i, c]) ** 2))) * 1e3, 4)
+            for j, c in zip(mus["spans"], span)}
+
+
+HELDOUT = Path(__file__).resolve().parents[2] / "test" / "data" / "muscles_myoarm_heldout.npz"
+
+
+def write_heldout(src: MyoArm, path: Path, rng, n: int = 120) -> None:
+    """The source's exact geometry at postures the fit never saw (test_muscles.py): n over
+    our joints' ranges, n inside the library's movement box."""
+    lo, hi = joint_box()
+    q = rng.uniform(lo, hi, size=(n, 20))
+    L, R = src.evaluate(q)
+    blo, bhi = movement_box()
+    qb = rng.uniform(blo, bhi, size=(n, 20))
+    _, Rb = src.evaluate(qb)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    f32 = np.float32  # 0.03 µm at 0.3 m: far below the errors compared
+    np.savez_compressed(path, names=np.array(src.names), q=q, length=L.astype(f32),
+                        moment_arm=R.astype(f32), q_box=qb, moment_arm_box=Rb.astype(f32),
+                        source=np.array(f"MyoArm myo_sim {src.version}; Apache-2.0"))
+
+
+def build(out: Path, seed: int = 0, heldout: Path | None = None,
+          xml: Path | None = None) -> dict:
+    t0 = time.perf_counter()
+    src = MyoArm(xml)
+    rng = np.random.default_rng(seed)
+    lo, hi = joint_box()
+    bad = check_signs(src, lo, hi)
+    if bad:
+        raise SystemExit("joint mapping gives the wrong action: " + "; ".join(bad))
+    spans = find_spans(src, lo, hi, rng)
+    center, half = 0.5 * (hi + lo), 0.5 * (hi - lo)
+    qf = rng.uniform(lo, hi, size=(N_FIT, 20))
+    qt = rng.uniform(lo, hi, size=(N_TEST, 20))
+    Lf, Rf = src.evaluate(qf)
+    Lt, Rt = src.evaluate(qt)
+    xf, xt = (qf - center) / half, (qt - center) / half
+    jumps = find_jumps(src, spans, lo, hi, rng)
+    muscles = []
+    for i, name in enumerate(src.names):
+        span = spans[i]
+        fit = fit_muscle(xf, Lf[:, i], Rf[:, i], xt, Lt[:, i], Rt[:, i], span)
+        joints = [JOINT_NAMES[j] for j in span]
+        muscles.append({
+            "name": name,
+            **src.parameters(i),
+            "spans": joints,
+            "surrogate": {
+                "exponents": fit["exps"].tolist(),
+                "length": [float(f"{c:.9g}") for c in fit["coef"][:, 0]],
+                "moment_arms": {jn: [float(f"{c:.9g}") for c in fit["coef"][:, 1 + k]]
+                                for k, jn in enumerate(joints)},
+            },
+            "fit": {
+                "degree": fit["degree"],
+                "length_rms_mm": round(float(fit["rms"][0]) * 1e3, 4),
+                "length_max_mm": round(float(fit["max"][0]) * 1e3, 4),
+                "moment_arm_rms_mm": {jn: round(float(fit["rms"][1 + k]) * 1e3, 4)
+                                      for k, jn in enumerate(joints)},
+                "moment_arm_max_mm": {jn: round(float(fit["max"][1 + k]) * 1e3, 4)
+                                      for k, jn in enumerate(joints)},
+                "excluded_samples": fit["excluded"],
+                "jumps": sum(1 for jp in jumps if jp["muscle"] == name),
+            },
+        })
+        print(f"{name:8s} deg {fit['degree']} K {len(fit['exps']):4d} "
+              f"L {fit['rms'][0] * 1e3:.3f} mm  r max-RMS {fit['rms'][1:].max() * 1e3:.3f} mm "
+              f"excl {fit['excluded']}", flush=True)
+    envelope_errors(src, muscles, center, half, rng)
+    if heldout is not None:
+        write_heldout(src, heldout, np.random.default_rng(seed + 1000))
+    source = {
+        "name": "MyoSuite myo_sim MyoArm (myoarm_r), MuJoCo",
+        "version": src.version,
+        "licence": "Apache-2.0",
+        "url": "https://github.com/MyoHub/myo_sim (PyPI: myo-sim)",
+        "notice": ("Muscle parameters and path geometry derived from MyoSim "
+                   "(MyoSuite, Apache License 2.0; copyright its authors: Vittorio "
+                   "Caggiano, Huiyi Wang et al.), itself converted from the MoBL "
+                   "upper-extremity model and a hand model; see "
+                   "muscles_myoarm.LICENSE for the licence text."),
+        "derived_by": "python -m forearm_dynamics.muscles.fit (forearm_dynamics)",
+        "mapping": {k: {"source_joint": v[0], "sign": v[1]} for k, v in JOINT_MAP.items()},
+        "held": "every shoulder joint at 0 (arm at the side), MCP abductions at 0",
+        "parameter_rule": ("L0 = (lengthrange_hi - lengthrange_lo) / (range_hi - range_lo); "
+                           "LTs = lengthrange_lo - range_lo * L0; where that is < 0 "
+                           "(PQ, OP, RI3): LTs = 0, L0 = lengthrange_hi / range_hi; "
+                           "pennation 0; "
+                           "vmax 10 L0/s"),
+    }
+    if xml is not None:
+        source.update(name=f"MuJoCo model {xml}", licence="as stated by that model",
+                      url=str(xml), notice="derived from the user's own model")
+    doc = {
+        "format": "forearm_dynamics.muscles/1",
+        "side": "right",
+        "source": source,
+        "body_size": {"reference": "50th-percentile male (model.yaml)"},
+        "joints": {"names": list(JOINT_NAMES), "center": center.tolist(),
+                   "half_range": half.tolist()},
+        "fit": {"samples": N_FIT, "held_out": N_TEST, "seed": seed, "target_mm": 1.0,
+                "max_degree": MAX_DEGREE, "max_terms": MAX_TERMS,
+                "jump_tolerance_mm": JUMP_TOL * 1e3, "jumps": jumps[:200],
+                "n_jumps": len(jumps), "seconds": round(time.perf_counter() - t0, 1)},
+        "muscles": muscles,
+    }
+    out.write_text(json.dumps(doc, separators=(",", ":")) + "\n", encoding="utf-8")
+    return doc
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("-o", "--output", type=Path, default=DEFAULT_OUT)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--heldout", type=Path, default=HELDOUT,
+                    help="where to write the held-out source geometry the tests compare with")
+    ap.add_argument("--xml", type=Path, default=None,
+                    help="a MuJoCo model of your own (MyoArm's joint names) instead of MyoArm")
+    args = ap.parse_args(argv)
+    doc = build(args.output, args.seed, None if args.xml else args.heldout, args.xml)
+    pairs = [(m["fit"]["moment_arm_rms_mm"][j], m["name"], j)
+             for m in doc["muscles"] for j in m["spans"]]
+    pairs.sort(reverse=True)
+    print(f"wrote {args.output}: {len(doc['muscles'])} muscles, {len(pairs)} pairs, "
+          f"{doc['fit']['n_jumps']} jump steps; worst pairs (RMS mm):")
+    for r, n, j in pairs[:10]:
+        print(f"  {n} {j}: {r:.3f}")
+    env = sorted(((m["fit"]["movement_box_moment_arm_rms_mm"][j], m["name"], j)
+                  for m in doc["muscles"] for j in m["spans"]), reverse=True)
+    print(f"over the movements' box: {sum(r <= 1.0 for r, _, _ in env)}/{len(env)} pairs "
+          "<= 1 mm; worst:")
+    for r, n, j in env[:10]:
+        print(f"  {n} {j}: {r:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,168 @@
+"""Static optimisation per sample: the muscle activations behind one joint-torque vector.
+
+    minimise   Σ_i a_i²  +  Σ_j (r_j / r_opt_j)²
+    subject to Σ_i R_ji · F_i(a_i) + r_j = τ_j − Σ_i R_ji · P_i   (every DOF j)
+               0 ≤ a_i ≤ 1
+
+F_i(a) = a · F0 · f_L(l̃) · f_V(ṽ) · cos(α) (rigid tendon, DeGroote-Fregly 2016 curves,
+curves.py), P_i the passive fibre force (0 unless passive=True: OpenSim's SO leaves it out
+too). r_j is one reserve torque per DOF with optimal torque r_opt (1 N·m by default), weighted
+as OpenSim's SO weighs a reserve CoordinateActuator (its activation r/r_opt, squared), so a
+torque the muscles cannot carry goes to the reserve, visible in `reserves`, never hidden.
+
+Why daqp (MIT): a dual active-set QP solver made for small dense problems solved again and
+again; its workspace (`daqp.Model`) keeps the last sample's active set, so a sample close to
+the previous one is solved in a few iterations (warm start). The problem is always feasible
+(free reserves) and strictly convex (positive diagonal cost), so the optimum is unique.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import daqp
+import numpy as np
+
+from .curves import UnitForces
+from .model import MuscleModel, MuscleModelError, _posture
+
+_INF = 1e30  # daqp's infinity
+_EQ = 5  # daqp sense: ACTIVE | IMMUTABLE = an equality constraint
+# daqp's bound tolerance (default 1e-6 in activation): an activation that ends 1e-6 outside
+# [0, 1] and is clipped moves its torque by up to 1e-6 · F0 · r ≈ 1e-5 N·m; 1e-9 keeps the
+# torque balance within 1e-6 N·m (equalities are exact in an active-set solver).
+_SETTINGS = {"primal_tol": 1e-9}
+
+
+@dataclass(frozen=True)
+class MuscleSolution:
+    """One sample's split of the torques into muscles (vectors in model.names order)."""
+
+    activations: np.ndarray  # (n,) 0..1
+    forces: np.ndarray  # (n,) N, tendon force (active + passive if included)
+    reserves: np.ndarray  # (20,) N·m, joint_names order
+    infeasible: bool  # solver failed, or a muscle at a = 1: the reserve carries the rest
+    solve_time: float  # s, the QP alone
+    residual: float  # max |R·F + r − τ| N·m
+    iterations: int
+    exitflag: int
+
+
+@dataclass(frozen=True)
+class MuscleSeries:
+    """A recording's solutions: arrays with one row per sample."""
+
+    names: tuple[str, ...]
+    joint_names: tuple[str, ...]
+    activations: np.ndarray  # (N, n)
+    forces: np.ndarray  # (N, n)
+    reserves: np.ndarray  # (N, 20)
+    infeasible: np.ndarray  # (N,) bool
+    solve_time: np.ndarray  # (N,) s
+    residual: np.ndarray  # (N,) N·m
+
+
+class StaticOptimizer:
+    """Warm-started static optimisation of one muscle model (see the module docstring)."""
+
+    def __init__(self, model: MuscleModel, *, reserve_optimal_torque: float | np.ndarray = 1.0,
+                 passive: bool = False, velocity: bool = True, saturation_tol: float = 1e-6):
+        nj = len(model.joint_names)
+        r_opt = np.broadcast_to(np.asarray(reserve_optimal_torque, float), (nj,)).copy()
+        if np.any(~np.isfinite(r_opt)) or np.any(r_opt <= 0):
+            raise MuscleModelError(f"reserve_optimal_torque must be > 0 N·m, got {reserve_optimal_torque!r}")
+        self.model = model
+        self.reserve_optimal_torque = r_opt
+        self.passive = bool(passive)
+        self.velocity = bool(velocity)
+        self.saturation_tol = float(saturation_tol)
+        n = model.n
+        self._n, self._nj = n, nj
+        self._unit = UnitForces(model.params(), use_velocity=self.velocity, passive=self.passive)
+        self._H = np.diag(np.concatenate([np.full(n, 2.0), 2.0 / r_opt ** 2]))
+        self._f = np.zeros(n + nj)
+        self._A = np.zeros((nj, n + nj))
+        self._A[:, n:] = np.eye(nj)
+        self._bu = np.concatenate([np.ones(n), np.full(nj, _INF), np.zeros(nj)])
+        self._bl = np.concatenate([np.zeros(n), np.full(nj, -_INF), np.zeros(nj)])
+        self._sense = np.concatenate([np.zeros(n + nj), np.full(nj, _EQ)]).astype(np.int32)
+        self._qp = None
+
+    def reset(self) -> None:
+        """Forget the warm start (a new recording, a changed model)."""
+        self._qp = None
+
+    def _problem(self, R: np.ndarray, L: np.ndarray, V: np.ndarray, tau: np.ndarray):
+        unit, pas = self._unit(L, V)
+        self._A[:, : self._n] = (R * unit[:, None]).T
+        rhs = tau - R.T @ pas if self.passive else tau
+        self._bu[-self._nj:] = rhs
+        self._bl[-self._nj:] = rhs
+        return unit, pas
+
+    def _cold(self):
+        self._qp = daqp.Model()
+        self._qp.setup(self._H, self._f, self._A, self._bu, self._bl, self._sense)
+        self._qp.settings = _SETTINGS
+
+    def _run(self):
+        t0 = time.perf_counter()
+        if self._qp is None:
+            self._cold()
+        else:
+            self._qp.update(A=self._A, bupper=self._bu, blower=self._bl)
+        x, _, flag, info = self._qp.solve()
+        if flag < 1:  # a warm start gone wrong: solve once more from scratch
+            self._cold()
+            x, _, flag, info = self._qp.solve()
+        return np.array(x), int(flag), int(info.get("iterations", 0)), time.perf_counter() - t0
+
+    def _finish(self, x, flag, iters, dt, R, unit, pas, tau) -> MuscleSolution:
+        n = self._n
+        if flag < 1:
+            a = np.full(n, np.nan)
+            r = np.full(self._nj, np.nan)
+            return MuscleSolution(a, a.copy(), r, True, dt, float("nan"), iters, flag)
+        a = np.clip(x[:n], 0.0, 1.0)
+        r = x[n:]
+        forces = a * unit + pas
+        residual = float(np.max(np.abs(R.T @ forces + r - tau)))
+        infeasible = bool(np.any(a >= 1.0 - self.saturation_tol))
+        return MuscleSolution(a, forces, r, infeasible, dt, residual, iters, flag)
+
+    def solve(self, q, qd, tau) -> MuscleSolution:
+        """One sample: q (rad), qd (rad/s), tau (N·m), each (20,) in joint_names order."""
+        tau = _posture(tau, "tau")
+        if tau.ndim != 1:
+            raise MuscleModelError("solve() takes one sample; solve_many() takes (N, 20)")
+        R, L, V = self.model.geometry(q, qd)
+        unit, pas = self._problem(R, L, V, tau)
+        return self._finish(*self._run(), R, unit, pas, tau)
+
+    def solve_geometry(self, R, L, V, tau) -> MuscleSolution:
+        """As solve(), with the geometry already evaluated (model.geometry)."""
+        unit, pas = self._problem(R, L, V, tau)
+        return self._finish(*self._run(), R, unit, pas, tau)
+
+    def solve_many(self, q, qd, tau) -> MuscleSeries:
+        """A recording (N, 20) each, in time order (each sample warm-starts the next)."""
+        q, qd, tau = (_posture(x, w) for x, w in ((q, "q"), (qd, "qd"), (tau, "tau")))
+        q, qd, tau = np.atleast_2d(q), np.atleast_2d(qd), np.atleast_2d(tau)
+        if not (q.shape == qd.shape == tau.shape):
+            raise MuscleModelError(f"q, qd, tau must have one shape, got {q.shape}, {qd.shape}, {tau.shape}")
+        N, n = len(q), self._n
+        Rs = self.model.moment_arms(q)
+        Ls = self.model.lengths(q)
+        Vs = -np.einsum("kij,kj->ki", Rs, qd)
+        out = {k: np.empty((N, n)) for k in ("a", "f")}
+        res = np.empty((N, self._nj))
+        inf = np.zeros(N, bool)
+        st = np.empty(N)
+        resid = np.empty(N)
+        for k in range(N):
+            s = self.solve_geometry(Rs[k], Ls[k], Vs[k], tau[k])
+            out["a"][k], out["f"][k], res[k] = s.activations, s.forces, s.reserves
+            inf[k], st[k], resid[k] = s.infeasible, s.solve_time, s.residual
+        return MuscleSeries(self.model.names, tuple(self.model.joint_names), out["a"], out["f"],
+                            res, inf, st, resid)

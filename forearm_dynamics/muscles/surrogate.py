@@ -1,0 +1,216 @@
+"""Moment arms and muscle-tendon lengths as polynomials of the posture (the fast path).
+
+Why polynomials: the exact path geometry (wrapping surfaces) costs ~200 µs per posture in
+MuJoCo and ~66 ms in OpenSim; a polynomial of the joints a muscle crosses costs a few µs and
+is fitted offline to the source's own moment arms (fit.py). Each muscle's polynomials use the
+normalised joint angles x = (q − centre) / half_range of the fit box (the README ranges);
+a posture outside the box is held at its edge (x clipped to [−1, 1]): polynomials do not
+extrapolate, and the geometry there was not fitted.
+
+Evaluation: every distinct monomial of every muscle is evaluated once, degree by degree (a
+monomial of degree d = one of degree d − 1 times one variable: the set of each muscle's
+monomials of total degree <= D holds every such parent), then one sparse matrix maps the
+monomials to the n lengths and the spanned (muscle, joint) moment arms.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy import sparse
+
+from ..description import JOINT_NAMES
+
+_CHUNK = 2048  # samples per block in the batch path (memory: chunk × monomials)
+#: Coefficients dropped per row while the sum of their magnitudes stays below this (m): on
+#: the clipped box every |monomial| <= 1, so a row moves by at most PRUNE_M (0.02 mm) and the
+#: sparse product, most of the cost, shrinks by ~30 % (24 366 -> 17 328 terms, shipped file).
+PRUNE_M = 2e-5
+
+
+def _prune(coef: sparse.csr_matrix, budget: float) -> sparse.csr_matrix:
+    """Drop each row's smallest coefficients while their |sum| bound stays <= budget."""
+    keep = np.ones(coef.nnz, bool)
+    for r in range(coef.shape[0]):
+        a, b = coef.indptr[r], coef.indptr[r + 1]
+        order = np.argsort(np.abs(coef.data[a:b]))
+        n_drop = int(np.searchsorted(np.cumsum(np.abs(coef.data[a:b])[order]), budget,
+                                     side="right"))
+        keep[a + order[:n_drop]] = False
+    out = coef.copy()
+    out.data[~keep] = 0.0
+    out.eliminate_zeros()
+    return out
+
+
+class Surrogate:
+    """Lengths (n,) and moment arms (n, 20) of a posture, from fitted polynomials."""
+
+    def __init__(self, center: np.ndarray, half: np.ndarray, keys: list[tuple[int, ...]],
+                 coef: sparse.csr_matrix, pair_rows: np.ndarray, pair_cols: np.ndarray,
+                 n: int):
+        """keys: the monomials' exponent tuples (20 ints), sorted by degree, the constant
+        first; coef's columns in that order."""
+        self.center = center
+        self.half = half
+        self.inv_half = 1.0 / half
+        self.keys = np.asarray(keys, int).reshape(-1, len(JOINT_NAMES))  # (K, 20) exponents
+        self.coef = coef  # (n + n_pairs, K): pruned and scaled, the only coefficients used
+        self.pair_rows, self.pair_cols = pair_rows, pair_cols
+        self.pair_flat = pair_rows * len(JOINT_NAMES) + pair_cols
+        self.n = n
+        self._xe = np.ones(len(JOINT_NAMES) + 1)
+        self._mono = np.ones(len(keys))
+        pos = {k: i for i, k in enumerate(keys)}
+        degree = np.array([sum(k) for k in keys])
+        if len(keys) == 0 or degree[0] != 0 or np.any(np.diff(degree) < 0):
+            raise ValueError("monomials must be sorted by degree, the constant first")
+        self.levels = []  # (slice, parent positions) per degree
+        variables = [0]  # per monomial: the variable (index into [1, x...]) it adds
+        for d in range(1, int(degree.max()) + 1):
+            at = np.nonzero(degree == d)[0]
+            parents, var = [], []
+            for i in at:
+                k = list(keys[i])
+                j = next(j for j, e in enumerate(k) if e)
+                k[j] -= 1
+                parents.append(pos[tuple(k)])
+                var.append(j + 1)
+            self.levels.append((slice(int(at[0]), int(at[-1]) + 1), np.array(parents)))
+            variables += var
+        self.variables = np.array(variables)
+
+    @classmethod
+    def from_doc(cls, joints: dict, spans: Sequence[Sequence[str]], rows: Sequence[dict], *,
+                 length_scale: np.ndarray, joint_scale: np.ndarray) -> Surrogate:
+        """Build from the file's `joints` and each muscle's `surrogate` (see fit.py)."""
+        nj = len(JOINT_NAMES)
+        center = np.asarray(joints["center"], float)
+        half = np.asarray(joints["half_range"], float)
+        if center.shape != (nj,) or half.shape != (nj,) or np.any(half <= 0):
+            raise ValueError("joints.center / half_range must be 20 numbers (half_range > 0)")
+        index: dict[tuple[int, ...], int] = {}
+        data, ri, ci = [], [], []
+        pair_rows, pair_cols = [], []
+        row_scale, pair_scale = [], []  # body size, applied after pruning (size-independent)
+        n = len(rows)
+        n_pairs = sum(len(s) for s in spans)
+        pair_base = n
+        for m, (span, row) in enumerate(zip(spans, rows)):
+            cols = [JOINT_NAMES.index(j) for j in span]
+            exps = np.asarray(row["exponents"], int)
+            if exps.ndim != 2 or exps.shape[1] != len(cols) or np.any(exps < 0):
+                raise ValueError(f"muscle #{m}: exponents must be (K, {len(cols)}) non-negative")
+            length = np.asarray(row["length"], float)
+            arms = row["moment_arms"]
+            if length.shape != (len(exps),) or set(arms) != set(span):
+                raise ValueError(f"muscle #{m}: length / moment_arms do not match exponents")
+            keys = []
+            for e in exps:
+                g = np.zeros(nj, int)
+                g[cols] = e
+                key = tuple(g)
+                if key not in index:
+                    index[key] = len(index)
+                keys.append(index[key])
+            keys = np.asarray(keys)
+            ri += [m] * len(keys)
+            ci += keys.tolist()
+            data += length.tolist()
+            row_scale.append(length_scale[m])
+            for j, c in zip(span, cols):
+                a = np.asarray(arms[j], float)
+                if a.shape != (len(exps),):
+                    raise ValueError(f"muscle #{m}: moment arm about {j} has the wrong length")
+                ri += [pair_base] * len(keys)
+                ci += keys.tolist()
+                data += a.tolist()
+                pair_scale.append(joint_scale[c])
+                pair_rows.append(m)
+                pair_cols.append(c)
+                pair_base += 1
+        if not np.all(np.isfinite(data)):
+            raise ValueError("coefficients must be finite")
+        keys = sorted(index, key=lambda k: (sum(k), index[k]))
+        order = np.array([index[k] for k in keys])
+        new_col = np.empty(len(keys), int)
+        new_col[order] = np.arange(len(keys))
+        coef = sparse.csr_matrix((data, (ri, new_col[np.asarray(ci, int)])),
+                                 shape=(n + n_pairs, len(keys)))
+        coef.sum_duplicates()
+        coef = sparse.diags(np.asarray(row_scale + pair_scale, float)) @ _prune(coef, PRUNE_M)
+        coef = sparse.csr_matrix(coef)
+        return cls(center, half, keys, coef, np.asarray(pair_rows), np.asarray(pair_cols), n)
+
+    @property
+    def n_monomials(self) -> int:
+        return len(self._mono)
+
+    def polynomial(self, row: int) -> tuple[np.ndarray, np.ndarray]:
+        """Row `row` of the coefficient matrix (0..n-1: a muscle's length, then its moment
+        arms in pair order) as (exponents (K_r, 20), coefficients (K_r,)) of x, after
+        pruning and body-size scaling: exactly what `evaluate` sums. Anything that must
+        agree with the node (the OpenSim reference's FunctionBasedPath) reads it here, never
+        the file, so the two cannot differ."""
+        a, b = self.coef.indptr[row], self.coef.indptr[row + 1]
+        return self.keys[self.coef.indices[a:b]], self.coef.data[a:b].copy()
+
+    def moment_arm_row(self, muscle: int, joint: int) -> int:
+        """The coefficient row of (muscle, joint)'s moment arm (KeyError if not spanned)."""
+        hit = np.nonzero((self.pair_rows == muscle) & (self.pair_cols == joint))[0]
+        if len(hit) != 1:
+            raise KeyError((muscle, joint))
+        return self.n + int(hit[0])
+
+    def in_box(self, q: np.ndarray) -> np.ndarray:
+        """(N,) True where no spanned joint of q (N, 20) lies outside the fit box, i.e. where
+        the clip in `evaluate` changes nothing (the box test is the clip's own, |x| <= 1, up
+        to 1e-12: a movement ending exactly on a range edge rounds to 1 + 2e-16)."""
+        x = (np.atleast_2d(q) - self.center) * self.inv_half
+        spanned = np.unique(self.pair_cols)
+        return (np.abs(x[:, spanned]) <= 1.0 + 1e-12).all(axis=1)
+
+    def _x(self, q: np.ndarray) -> np.ndarray:
+        return np.clip((q - self.center) * self.inv_half, -1.0, 1.0)
+
+    def _monomials(self, xe: np.ndarray, mono: np.ndarray) -> np.ndarray:
+        """Fill mono (..., K) from xe (..., 21) = [1, x], degree by degree."""
+        xv = xe[..., self.variables]  # one gather for every level
+        for sl, parent in self.levels:
+            np.multiply(mono[..., parent], xv[..., sl], out=mono[..., sl])
+        return mono
+
+    def evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One posture (20,) -> (moment arms (n, 20), lengths (n,))."""
+        xe = self._xe
+        np.subtract(q, self.center, out=xe[1:])
+        xe[1:] *= self.inv_half
+        np.minimum(xe, 1.0, out=xe)
+        np.maximum(xe, -1.0, out=xe)
+        vals = self.coef @ self._monomials(xe, self._mono)
+        R = np.zeros(self.n * len(JOINT_NAMES))
+        R[self.pair_flat] = vals[self.n:]
+        return R.reshape(self.n, len(JOINT_NAMES)), vals[: self.n]
+
+    def _batch(self, q: np.ndarray) -> np.ndarray:
+        out = np.empty((len(q), self.coef.shape[0]))
+        for s in range(0, len(q), _CHUNK):
+            x = self._x(q[s:s + _CHUNK])
+            xe = np.concatenate([np.ones((len(x), 1)), x], axis=1)
+            mono = self._monomials(xe, np.ones((len(x), self.n_monomials)))
+            out[s:s + _CHUNK] = (self.coef @ mono.T).T
+        return out
+
+    def moment_arms(self, q: np.ndarray) -> np.ndarray:
+        if q.ndim == 1:
+            return self.evaluate(q)[0]
+        vals = self._batch(q)
+        R = np.zeros((len(q), self.n * len(JOINT_NAMES)))
+        R[:, self.pair_flat] = vals[:, self.n:]
+        return R.reshape(len(q), self.n, len(JOINT_NAMES))
+
+    def lengths(self, q: np.ndarray) -> np.ndarray:
+        if q.ndim == 1:
+            return self.evaluate(q)[1]
+        return self._batch(q)[:, : self.n]
