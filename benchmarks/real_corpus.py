@@ -63,6 +63,8 @@ ESTIMATORS = {
     "kalman_delay_0.1": ("kalman", {"delay_s": 0.1}),
     "kalman_delay_0.2": ("kalman", {"delay_s": 0.2}),
     "butterworth": ("butterworth", {"butterworth_cutoff_hz": 6.0}),
+    # issue 29's opt-in practice gain, causal (kalman.py: practice_band_hz, the measured setting)
+    "kalman_practice_gain": ("kalman", {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}),
 }
 BASELINE = "butterworth"
 MOBL = {"elbow_flexion": "elbow_flexion", "pro_sup": "pro_sup", "wrist_flexion": "flexion",
@@ -277,7 +279,8 @@ def run(args) -> dict:
 
 # -- tables for the docs -------------------------------------------------------------------
 DOCS_ROWS = (("kalman", "`kalman`, 0"), ("kalman_delay_0.05", "`kalman`, 0.05 s"),
-             ("kalman_delay_0.1", "`kalman`, 0.1 s"), ("kalman_delay_0.2", "`kalman`, 0.2 s"))
+             ("kalman_delay_0.1", "`kalman`, 0.1 s"), ("kalman_delay_0.2", "`kalman`, 0.2 s"),
+             ("kalman_practice_gain", "`kalman` practice_band_hz 6 (opt-in), 0"))
 
 
 def _x(v) -> str:

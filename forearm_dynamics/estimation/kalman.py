@@ -35,12 +35,14 @@ benchmarks/estimation_zoo.py, whose committed output states the default's number
 delay (delay_s > 0) the cap is off: the smoother sees each sample from both sides, as the
 practice does (mocap IK 100 Hz, delay 50 ms: 1.27 / 1.04 x the offline floor uncapped,
 1.43 / 1.62 x capped at 8 Hz).
-Since issue 29 the cap is off by default (kalman_min_bandwidth_hz 0): on raw recordings
-of real arm movements (benchmarks/real_corpus.py, tuning half) coloured content above 6 Hz
-is what the practice removes, so it is smoothed like noise; and, causal with positions
-only, each joint's gain is computed with its measured jerk density (r_eff = r sqrt(psd /
-s_j), at most 4 r) and its q̇, q̈ are scaled by their online regression gain on the
-practice's (practice_gain.py; estimator.practice_band_hz, 0 = off); docs/estimation.md.
+Issue 29's practice gain is an option (estimator.practice_band_hz 6 with
+kalman_min_bandwidth_hz 0; off by default): on raw recordings of real arm movements
+(benchmarks/real_corpus.py) coloured content above 6 Hz is what the practice removes, so it
+is smoothed like noise; and, causal with positions only, each joint's gain is computed with
+its measured jerk density (r_eff = r sqrt(psd / s_j), at most 4 r) and its q̇, q̈ are scaled
+by their online regression gain on the practice's (practice_gain.py). It is not the default
+because the σ is not yet calibrated with it on the simulated sensors and the simulated
+sensor zoo is worse with it (docs/estimation.md, docs/uncertainty.md).
 White noise (band and white levels alike: a camera, a
 glove, an encoder) is noise at every frequency and is smoothed as strongly as it says.
 The jump
@@ -98,10 +100,10 @@ BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
 MAX_DELAY_S = 0.2
 EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
-COLOURED_RATIO = 1.5
+COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
 #: the measured jerk level may narrow a joint's filter by at most this factor on its noise
 #: (bandwidth x R_EFF_MAX^(-1/3)): a slow movement that speeds up, or a gap, is followed
-R_EFF_MAX = 4.0  # band level / white level above which the noise counts as coloured
+R_EFF_MAX = 4.0
 # the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
 # a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
 WHITE_ARM_EVALUATIONS = 25
@@ -172,16 +174,17 @@ class KalmanCA(StateEstimator):
         SettingSpec("kalman_noise_floor_deg", 0.01, "deg",
                     "lowest noise the online estimate may believe (and the velocity floor in deg/s)",
                     lo=1e-6, hi=90.0),
-        SettingSpec("kalman_min_bandwidth_hz", 0.0, "Hz",
-                    "causal, positions only, coloured noise: never smooth below this band: the "
-                    "belief is capped where the filter's bandwidth reaches it; 0 = off (the "
-                    "default since issue 29: coloured content above 6 Hz is what the practice "
-                    "removes, so it is smoothed like noise)", lo=0.0, hi=1000.0),
-        SettingSpec("practice_band_hz", 6.0, "Hz",
-                    "causal, positions only: scale each joint's qd and qdd by their online "
-                    "least-squares gain on the offline practice's (zero-phase low-pass at this "
-                    "band + derivatives), measured per joint (practice_gain.py); 0 = off",
-                    lo=0.0, hi=1000.0),
+        SettingSpec("kalman_min_bandwidth_hz", 7.0, "Hz",
+                    "causal, positions only, coloured noise: never smooth below this band (keeps "
+                    "what the offline 6 Hz practice keeps): the belief is capped where the "
+                    "filter's bandwidth reaches it; 0 = off (set 0 with practice_band_hz: "
+                    "docs/estimation.md)", lo=0.0, hi=1000.0),
+        SettingSpec("practice_band_hz", 0.0, "Hz",
+                    "opt-in (issue 29), causal, positions only: scale each joint's qd and qdd by "
+                    "their online least-squares gain on the offline practice's (zero-phase "
+                    "low-pass at this band + derivatives), measured per joint (practice_gain.py); "
+                    "6 with kalman_min_bandwidth_hz 0 is the measured setting "
+                    "(docs/estimation.md); 0 = off", lo=0.0, hi=1000.0),
         SettingSpec("delay_s", 0.0, "s",
                     "output the fixed-lag smoothed estimate of the sample this far back, "
                     "stamped with its stamp (0 = causal)", lo=0.0, hi=MAX_DELAY_S),
