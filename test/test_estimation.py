@@ -181,10 +181,7 @@ def test_kalman_error_covariance_is_its_steady_state_covariance() -> None:
         x = f @ x + chol @ rng.standard_normal((3, N_COLS))
         truth[k] = x
     z = truth[:, 0, :] + rng.normal(0.0, r, (n_s, N_COLS))
-    # the filter alone: the practice gain (practice_band_hz) deliberately leaves the model's
-    # conditional mean for the regression on the offline practice (issue 29)
-    e = make_estimator("kalman", N_COLS, {"kalman_jerk_psd": psd, "kalman_noise_deg": 0.5,
-                                          "practice_band_hz": 0.0})
+    e = make_estimator("kalman", N_COLS, {"kalman_jerk_psd": psd, "kalman_noise_deg": 0.5})
     eq, eqd, eqdd, _ = feed(e, stamps(n_s, dt), z)
     k, p_prior = steady_state(dt, r, None, psd)
     h = np.array([[1.0, 0.0, 0.0]])

@@ -123,12 +123,12 @@ def test_coloured_noise_is_not_believed_3x_too_small(tau, rate) -> None:
     filter measures at least a third of the std, and the white level with the same spectral
     density around 10 Hz (noise.white_level_of_coloured) within 30 %; the third difference of
     consecutive samples (the first version's measure) reads 2-5 x less. Its belief is that
-    measurement with the cap off (the default since issue 29); with the cap on (coloured:
-    never smooth below 7 Hz) the belief is where the filter's bandwidth is 7 Hz."""
+    measurement with the cap off; with the default cap (coloured: never smooth below 7 Hz)
+    the belief is where the filter's bandwidth is 7 Hz."""
     sigma = math.radians(1.0)
     t = grid(round(6.0 * rate), rate)
     z = motion(t) + ou_noise(np.random.default_rng(3), len(t), N, sigma, tau, rate)
-    est = make_estimator("kalman", N, {"kalman_min_bandwidth_hz": 7.0})
+    est = make_estimator("kalman", N)
     est.run(t, z)
     r = np.sqrt(est.measured_noise()[0])
     assert r.min() >= sigma / 3
@@ -138,7 +138,7 @@ def test_coloured_noise_is_not_believed_3x_too_small(tau, rate) -> None:
     assert (third < r / 2).all()  # the naive estimate this replaces
     w = (est.psd / (np.asarray(est.noise_per_joint()) ** 2 / rate)) ** (1 / 6) / (2 * math.pi)
     np.testing.assert_allclose(w, est.values["kalman_min_bandwidth_hz"], rtol=1e-9)  # the cap
-    off = make_estimator("kalman", N)
+    off = make_estimator("kalman", N, {"kalman_min_bandwidth_hz": 0.0})
     off.run(t, z)
     np.testing.assert_allclose(off.noise_per_joint(), np.sqrt(off.measured_noise()[0]), rtol=0.25)
 

@@ -1,5 +1,6 @@
-"""Issue 29: the causal estimator against the offline practice (6 Hz zero-phase + derivatives)
-on the sensor content that real recordings have and the library's movements lack.
+"""Issue 29's practice gain (opt-in: estimator.practice_band_hz 6, kalman_min_bandwidth_hz 0):
+the causal estimator against the offline practice (6 Hz zero-phase + derivatives) on the
+sensor content that real recordings have and the library's movements lack.
 
 - A joint with little white noise but coloured content above 6 Hz (soft-tissue artefact,
   IK jitter) is smoothed to the practice's band: its q̈ follows the practice's, not the
@@ -24,6 +25,9 @@ from forearm_dynamics.estimation.practice_gain import practice_kernels
 pytestmark = pytest.mark.unit
 
 RATE = 100.0
+#: the practice gain is opt-in (kalman.py): the measured setting, and the same filter without it
+GAIN = {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}
+PLAIN = {"practice_band_hz": 0.0, "kalman_min_bandwidth_hz": 0.0}
 SETTLE_S = 3.0
 
 
@@ -65,8 +69,8 @@ def test_coloured_content_above_the_band_is_smoothed_like_the_practice() -> None
     q = (move + coloured + math.radians(0.005) * rng.standard_normal(n))[:, None]
     ref = practice_qdd(q)[:, 0]
     late = slice(int(SETTLE_S * RATE), None)
-    kal, _ = stream(q, "kalman", {})
-    plain, _ = stream(q, "kalman", {"practice_band_hz": 0.0})
+    kal, _ = stream(q, "kalman", GAIN)
+    plain, _ = stream(q, "kalman", PLAIN)
     bw, _ = stream(q, "butterworth", {"butterworth_cutoff_hz": 6.0})
     e_k = rms(kal[late, 0] - ref[late])
     e_plain = rms(plain[late, 0] - ref[late])
@@ -77,6 +81,11 @@ def test_coloured_content_above_the_band_is_smoothed_like_the_practice() -> None
     # ... and against the practice it beats the causal 6 Hz Butterworth
     assert e_k <= 0.85 * e_bw, (e_k, e_bw, e_plain)
     assert e_k <= 0.7 * e_plain, (e_k, e_plain)
+    # ... and the default (practice gain off, 7 Hz cap: this content is believed coloured and
+    # kept) is what it improves on; measured q̈ RMSE 2.69 with the gain, 4.77 the filter
+    # alone with the cap off, 6.12 the default, 6.90 the Butterworth (rad/s²)
+    default, _ = stream(q, "kalman", {})
+    assert e_k <= 0.5 * rms(default[late, 0] - ref[late]), (e_k, rms(default[late, 0] - ref[late]))
 
 
 def test_a_slow_movement_does_not_get_the_library_bandwidth() -> None:
@@ -89,8 +98,8 @@ def test_a_slow_movement_does_not_get_the_library_bandwidth() -> None:
     q = (0.8 * np.sin(2 * np.pi * 0.15 * t) + math.radians(0.2) * rng.standard_normal(n))[:, None]
     ref = practice_qdd(q)[:, 0]
     late = slice(int(SETTLE_S * RATE), None)
-    kal, est = stream(q, "kalman", {})
-    lib, est_lib = stream(q, "kalman", {"practice_band_hz": 0.0})
+    kal, est = stream(q, "kalman", GAIN)
+    lib, est_lib = stream(q, "kalman", PLAIN)
     psd = est.values["kalman_jerk_psd"]
     dt = 1.0 / RATE
 
