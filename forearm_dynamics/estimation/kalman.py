@@ -627,8 +627,10 @@ class KalmanCA(StateEstimator):
                 np.minimum(capped, r_eff, out=self._r_eff)
                 np.maximum(self._r_eff, self._floor, out=self._r_eff)
             # the innovations' prior variance: the groups' (at psd, r_eff) scaled to the joint's
-            # own (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2)
-            np.divide(self._r_gate, self._r_eff, out=self._rscale2)
+            # belief r (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2);
+            # r, not the gate's uncapped noise: without the practice gain r_eff = r, scale 1,
+            # and the gate and covariance() are main's (the 7 Hz cap's belief, as before)
+            np.divide(self._r, self._r_eff, out=self._rscale2)
             self._rscale2 *= self._rscale2
             self._innovation_std()  # not the groups' recursions: they are converged (still)
             self._armed = moved = True
