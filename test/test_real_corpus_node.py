@@ -10,8 +10,9 @@ reference's peak-to-peak, on the stamps the node answered. The bound is the issu
 "never worse than the causal 6 Hz Butterworth on any DOF of any raw recording": ratio <= 1.0
 per measured DOF (elbow, pro/sup, wrist flexion, wrist deviation); it is not loosened to
 today's estimator. The same replay with issue 29's opt-in practice gain (node parameters
-estimator.practice_band_hz 6, estimator.kalman_min_bandwidth_hz 0) meets it. The last test shows the benchmark's offline path is the node's: the
-node's torques equal realscore.node_outputs' at equal stamps.
+estimator.practice_band_hz 6, estimator.kalman_min_bandwidth_hz 0) meets it. The last test
+shows the benchmark's offline path is the node's: the node's torques equal
+realscore.node_outputs' at equal stamps.
 """
 
 from __future__ import annotations

@@ -1,5 +1,10 @@
 """Per-joint calibration of the causal derivatives against the offline practice, online.
 
+Opt-in (KalmanCA's estimator.practice_band_hz, 0 by default; measured with 6 Hz and
+kalman_min_bandwidth_hz 0): on the real corpus's held-out half it beats the default
+(benchmarks/real_corpus.json, docs/estimation.md), but the σ is not yet calibrated with it
+on the simulated sensors and the simulated sensor zoo is worse with it.
+
 Why (issue 29). On raw recordings of real arm movements the torques are judged against the
 offline practice: 6 Hz zero-phase Butterworth + derivatives. Whatever that band removes
 is error for the torque, white or coloured, signal or artefact; and what it keeps in its
