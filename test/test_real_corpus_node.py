@@ -9,8 +9,10 @@ recording's 100 Hz from now. Scored after realscore.SETTLE_S (1 s), NRMSE = RMSE
 reference's peak-to-peak, on the stamps the node answered. The bound is the issue's target,
 "never worse than the causal 6 Hz Butterworth on any DOF of any raw recording": ratio <= 1.0
 per measured DOF (elbow, pro/sup, wrist flexion, wrist deviation); it is not loosened to
-today's estimator. The second test shows the benchmark's offline path is the node's: the
-node's torques equal realscore.node_outputs' at equal stamps.
+today's estimator. The same replay with issue 29's opt-in practice gain (node parameters
+estimator.practice_band_hz 6, estimator.kalman_min_bandwidth_hz 0) meets it. The last test
+shows the benchmark's offline path is the node's: the node's torques equal
+realscore.node_outputs' at equal stamps.
 """
 
 from __future__ import annotations
@@ -44,10 +46,23 @@ def _recording():
     return next(r for r in load("held_out") if r.name == RECORDING)
 
 
+#: issue 29's opt-in practice gain, as the benchmark's kalman_practice_gain row runs it
+PRACTICE_GAIN = ("-p", "estimator.practice_band_hz:=6.0", "-p", "estimator.kalman_min_bandwidth_hz:=0.0")
+
+
 @pytest.fixture(scope="module")
 def replay():
+    return _replay()  # no parameter: the defaults a user gets
+
+
+@pytest.fixture(scope="module")
+def replay_practice_gain():
+    return _replay(*PRACTICE_GAIN)
+
+
+def _replay(*ros_args: str):
     rec = _recording()
-    node = rosproc.start("torque_node")  # no parameter: the defaults a user gets
+    node = rosproc.start("torque_node", *ros_args)
     peer = rosproc.Peer("real_corpus_test")
     replies: list[JointState] = []
     sub = peer.node.create_subscription(JointState, "joint_torques", replies.append, stream_qos(1000))
@@ -83,12 +98,23 @@ def _scores(rec, stamps, out_st, tau, arm):
     return realscore.score(out_st, tau[:, rec.columns], stamps, tau_ref[:, rec.columns])
 
 
-# Issue 29's target, not met by the default estimator (main's kalman): wrist_flexion 1.087x
-# on this held-out recording. strict: the day the default meets it, this xfail fails and
-# must be removed. The issue stays open until then (the opt-in practice gain, kalman.py).
+# Issue 29's target, not met by the default estimator (main's kalman): wrist_flexion 1.083x
+# on this held-out recording (1.087x before the group-seating fix). strict: the day the
+# default meets it, this xfail fails and must be removed. The issue stays open until then
+# (the opt-in practice gain meets it here: the next test; not on 30 other held-out series).
 @pytest.mark.xfail(strict=True, reason="issue 29 open: the default estimator is worse than the "
-                   "causal 6 Hz Butterworth on this recording's wrist_flexion (1.087x)")
+                   "causal 6 Hz Butterworth on this recording's wrist_flexion (1.083x)")
 def test_raw_recording_through_torque_node_no_worse_than_butterworth(replay) -> None:
+    _no_worse_than_butterworth(replay, "defaults")
+
+
+def test_raw_recording_through_torque_node_with_the_practice_gain(replay_practice_gain) -> None:
+    """The same with the opt-in practice gain (measured per DOF in benchmarks/real_corpus.json:
+    elbow 0.996, pro/sup 0.607, wrist flexion 0.773, deviation 0.892 x the Butterworth)."""
+    _no_worse_than_butterworth(replay_practice_gain, "practice_band_hz 6")
+
+
+def _no_worse_than_butterworth(replay, what: str) -> None:
     rec, stamps, out_st, effort = replay
     arm = build_model("segmented", 50, side=rec.side)
     assert (np.diff(out_st) > 0).all() and np.isin(out_st, stamps).all()
@@ -100,11 +126,11 @@ def test_raw_recording_through_torque_node_no_worse_than_butterworth(replay) -> 
     node_sc = _scores(rec, stamps, common, node_tau, arm)
     base_sc = _scores(rec, stamps, common, base_tau, arm)
     ratio = dict(zip(rec.measured, (node_sc.settled / base_sc.settled).round(3).tolist(), strict=True))
-    print(f"\n{RECORDING}: torque_node (defaults) NRMSE settled "
+    print(f"\n{RECORDING}: torque_node ({what}) NRMSE settled "
           + ", ".join(f"{j} {100 * x:.1f} %" for j, x in zip(rec.measured, node_sc.settled, strict=True))
           + f"; × causal 6 Hz Butterworth: {ratio}")
     worse = {j: x for j, x in ratio.items() if x > BOUND}
-    assert not worse, f"torque_node's defaults worse than the causal 6 Hz Butterworth on {worse}"
+    assert not worse, f"torque_node ({what}) worse than the causal 6 Hz Butterworth on {worse}"
 
 
 def test_node_torques_are_the_offline_replays(replay) -> None:

@@ -93,14 +93,14 @@ def test_no_sigma_until_the_noise_is_measured(arm):
     assert np.array_equal(fixed.known, fixed.warm) and fixed.known[3:].all()
 
 
-def _jerk_read(jerk, margin, monkeypatch, noise_deg=0.5, seconds=12.0):
+def _jerk_read(jerk, margin, monkeypatch, noise_deg=0.5, seconds=12.0, settings=None):
     """RMS of the jerk the tracker reads on one joint: a constant jerk through 0.5 deg noise."""
     monkeypatch.setattr(lag, "NOISE_MARGIN", margin)
     rng = np.random.default_rng(3)
     t, z = still([noise_deg], seconds, rng)
     s = (t - t[0]) * 1e-9
     z = z + jerk * s[:, None] ** 3 / 6
-    est = make_estimator("kalman", 1, None)
+    est = make_estimator("kalman", 1, settings)
     src = state_source(est)
     tracker = lag.JerkTracker(1)
     ms = []
@@ -123,6 +123,18 @@ def test_the_noise_margin_reads_less_noise_as_jerk_and_keeps_a_real_one(monkeypa
     assert fake1 < 0.5 * fake0, (fake0, fake1)
     assert _jerk_read(1000.0, 1.0, monkeypatch) == pytest.approx(1000.0, rel=0.1)
     assert _jerk_read(300.0, 1.0, monkeypatch) > 0.6 * 300
+
+
+# Issue 29's opt-in practice gain (practice_band_hz 6, kalman_min_bandwidth_hz 0) is not the
+# default because of this (and the σ benchmark, docs/uncertainty.md). strict: the day the read
+# holds with the gain, this xfail fails and must be removed.
+@pytest.mark.xfail(strict=True, reason="issue 29 open: with the opt-in practice gain a constant "
+                   "1000 rad/s³ through 0.5 deg at 100 Hz is read 528 rad/s³, not within 10 % "
+                   "(the measured jerk level widens the filter: the read's baseline shortens to "
+                   "3 samples and the noise margin takes most of D)")
+def test_the_jerk_read_keeps_a_real_jerk_with_the_practice_gain(monkeypatch):
+    gain = {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}
+    assert _jerk_read(1000.0, 1.0, monkeypatch, settings=gain) == pytest.approx(1000.0, rel=0.1)
 
 
 @pytest.mark.parametrize("rate, after_s", [(RATE, 0.2), (1000.0, 0.12)])

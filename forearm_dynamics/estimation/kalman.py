@@ -35,6 +35,14 @@ benchmarks/estimation_zoo.py, whose committed output states the default's number
 delay (delay_s > 0) the cap is off: the smoother sees each sample from both sides, as the
 practice does (mocap IK 100 Hz, delay 50 ms: 1.27 / 1.04 x the offline floor uncapped,
 1.43 / 1.62 x capped at 8 Hz).
+Issue 29's practice gain is an option (estimator.practice_band_hz 6 with
+kalman_min_bandwidth_hz 0; off by default): on raw recordings of real arm movements
+(benchmarks/real_corpus.py) coloured content above 6 Hz is what the practice removes, so it
+is smoothed like noise; and, causal with positions only, each joint's gain is computed with
+its measured jerk density (r_eff = r sqrt(psd / s_j), at most 4 r) and its q̇, q̈ are scaled
+by their online regression gain on the practice's (practice_gain.py). It is not the default
+because the σ is not yet calibrated with it on the simulated sensors and the simulated
+sensor zoo is worse with it (docs/estimation.md, docs/uncertainty.md).
 White noise (band and white levels alike: a camera, a
 glove, an encoder) is noise at every frequency and is smoothed as strongly as it says.
 The jump
@@ -84,13 +92,18 @@ from .ca_model import process_noise, steady_state, transition  # noqa: F401 - pu
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
 from .noise import NoiseEstimator
+from .practice_gain import PracticeGain
 from .smoother import FixedLagSmoother
 
 NOISE_EVERY_S = 0.25
 BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
 MAX_DELAY_S = 0.2
+EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
 COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
+#: the measured jerk level may narrow a joint's filter by at most this factor on its noise
+#: (bandwidth x R_EFF_MAX^(-1/3)): a slow movement that speeds up, or a gap, is followed
+R_EFF_MAX = 4.0
 # the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
 # a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
 WHITE_ARM_EVALUATIONS = 25
@@ -99,6 +112,23 @@ WHITE_ARM_EVALUATIONS = 25
 def _summary(r: np.ndarray, floor: float) -> float:
     above = r[r > floor * 1.0001]
     return float(np.median(above)) if len(above) else float(r.max())
+
+
+#: how each posterior element (p00, p01, p02, p11, p12, p22) of a positions-only filter scales
+#: with its noise r at a fixed psd: the continuous-time limit P_ij ~ R w^(i + j + 1), R = r^2 dt,
+#: bandwidth w = (psd / R)^(1/6), so P_ij ~ r^(2 - (i + j + 1) / 3)
+_SEAT_POWERS = (5 / 3, 4 / 3, 1.0, 1.0, 2 / 3, 1 / 3)
+
+
+def _rescaled(p: tuple, s: float, vel: bool) -> tuple:
+    """A converged posterior p at noise r, moved to the noise s r: near the steady state there
+    (positions only: each element by its own power of s, _SEAT_POWERS). Scaled by s^2 for all
+    elements (the old seat) it was 11 % off in the q̈ lag at 1 kHz and, since issue 29's
+    measured jerk level narrows a still joint's filter (r_eff up to 4 r), took ~150 samples
+    to settle; with velocities the gain depends on two noises: s^2 (a step of one bin)."""
+    if vel:
+        return tuple(x * s * s for x in p)
+    return tuple(x * s**e for x, e in zip(p, _SEAT_POWERS))
 
 
 @dataclass(frozen=True)
@@ -147,7 +177,14 @@ class KalmanCA(StateEstimator):
         SettingSpec("kalman_min_bandwidth_hz", 7.0, "Hz",
                     "causal, positions only, coloured noise: never smooth below this band (keeps "
                     "what the offline 6 Hz practice keeps): the belief is capped where the "
-                    "filter's bandwidth reaches it; 0 = off", lo=0.0, hi=1000.0),
+                    "filter's bandwidth reaches it; 0 = off (set 0 with practice_band_hz: "
+                    "docs/estimation.md)", lo=0.0, hi=1000.0),
+        SettingSpec("practice_band_hz", 0.0, "Hz",
+                    "opt-in (issue 29), causal, positions only: scale each joint's qd and qdd by "
+                    "their online least-squares gain on the offline practice's (zero-phase "
+                    "low-pass at this band + derivatives), measured per joint (practice_gain.py); "
+                    "6 with kalman_min_bandwidth_hz 0 is the measured setting "
+                    "(docs/estimation.md); 0 = off", lo=0.0, hi=1000.0),
         SettingSpec("delay_s", 0.0, "s",
                     "output the fixed-lag smoothed estimate of the sample this far back, "
                     "stamped with its stamp (0 = causal)", lo=0.0, hi=MAX_DELAY_S),
@@ -164,6 +201,8 @@ class KalmanCA(StateEstimator):
         # per-joint noise belief (rad, rad/s); before any estimate: 0.5 deg, 1 deg/s
         self._r = np.full(n, self._fixed_r or math.radians(0.5))
         self._r_gate = self._r.copy()
+        self._r_eff = self._r.copy()  # the noise the gains are computed with (psd / r_eff^2)
+        self._rscale2 = np.ones(n)  # (r / r_eff)^2 per joint
         self._wmin = 2.0 * math.pi * v["kalman_min_bandwidth_hz"]
         self._rv = np.full(n, self._fixed_rv or math.radians(1.0))
         self._X = np.zeros((3, n))
@@ -199,6 +238,10 @@ class KalmanCA(StateEstimator):
         self._smooth_dt = 0.0
         self._first: tuple[int, np.ndarray] | None = None
         self._jump_exact = False
+        band = v["practice_band_hz"]
+        self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
+        self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
+        self._pg_residual = np.zeros((2, n))
         self.reset()
 
     # -- public state ---------------------------------------------------------------------
@@ -213,6 +256,30 @@ class KalmanCA(StateEstimator):
     def noise_per_joint(self) -> np.ndarray:
         """The position noise std each joint believes (rad), (n,) copy."""
         return self._r.copy()
+
+    def output_gain(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """With the practice gain on (causal, positions only): ((2, n) the gains applied to
+        (qd, qdd), (2, n) the mean square error of the scaled (qd, qdd) against the practice
+        as measured, 0 on exact joints); else None."""
+        if self._pgain is None or self._vel:
+            return None
+        return self._gain.copy(), self._pg_residual.copy()
+
+    def shrink_removed(self) -> np.ndarray | None:
+        """With the practice gain on (causal, positions only): (2, n) what the gains took from
+        the last output's (qd, qdd), (1 - g) x with x the filter's own estimate; else None.
+        The σ propagates it through the derivatives as one vector (uncertainty/torque_std.py):
+        it is the same movement shrunk on every joint at once, not independent noise."""
+        if self._pgain is None or self._vel:
+            return None
+        out = 1.0 - self._gain
+        out *= self._X[1:]
+        return out
+
+    def gain_noise_per_joint(self) -> np.ndarray:
+        """The noise each joint's gain is computed with (rad), (n,) copy: the belief times
+        sqrt(kalman_jerk_psd / the joint's measured jerk density) (practice_gain.py), capped."""
+        return self._r_eff.copy()
 
     def noise(self) -> float | None:
         """One summary of the believed position noise (rad): the median over the joints
@@ -286,7 +353,7 @@ class KalmanCA(StateEstimator):
         out = np.zeros((self.n, 3, 3))
         for g in self._groups:
             if g.P is not None:
-                out[g.idx] = ca_model.to_matrix(g.P)
+                out[g.idx] = ca_model.to_matrix(g.P) * self._rscale2[g.idx, None, None]
         return out
 
     # -- state ----------------------------------------------------------------------------
@@ -299,6 +366,8 @@ class KalmanCA(StateEstimator):
         self.noise_estimator.restart()
         if self._smoother is not None:
             self._smoother.restart()
+        if self._pgain is not None:
+            self._pgain.restart()
 
     def _start(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
         x = self._X
@@ -315,7 +384,7 @@ class KalmanCA(StateEstimator):
     def _regroup(self, vel: bool, dt: float) -> None:
         """Bin each joint's noise (hysteresis) and rebuild the groups if the bins changed."""
         changed = vel != self._vel
-        for row, r in ((0, self._r), (1, self._rv)):
+        for row, r in ((0, self._r_eff), (1, self._rv)):
             if row == 1 and not vel:
                 if (self._bins[1] != 0).any():
                     self._bins[1].fill(0)
@@ -354,8 +423,7 @@ class KalmanCA(StateEstimator):
             if g.P is None:  # seat it: scaled from the group its first joint was in, else solved
                 prev = next((o for o in old.values() if g.idx[0] in o.idx and o.P is not None), None)
                 if prev is not None and vel == self._vel_seat:
-                    s2 = (g.r / prev.r) ** 2
-                    g.P = tuple(x * s2 for x in prev.P)
+                    g.P = _rescaled(prev.P, g.r / prev.r, vel)
                 else:
                     g.P = ca_model.steady_posterior(dt, g.r, g.rv if vel else None, self.psd)
         self._vel_seat = vel
@@ -386,11 +454,17 @@ class KalmanCA(StateEstimator):
             np.take(kg[:3], gi, axis=1, out=self._Kp)
             if vel:
                 np.take(kg[3:], gi, axis=1, out=self._Kv)
-            sig = self._sig  # innovation std per joint, with the noise as measured
-            np.take(sg, gi, out=sig)
-            np.multiply(self._r_gate, self._r_gate, out=self._tmp)
-            sig += self._tmp
-            np.sqrt(sig, out=sig)
+            self._innovation_std()
+
+    def _innovation_std(self) -> None:
+        """Per joint innovation std with the noise as measured: the group's prior variance
+        scaled to the joint's own ((r / r_eff)^2) plus r^2."""
+        sig = self._sig
+        np.take(self._Sg, self._gidx, out=sig)
+        sig *= self._rscale2
+        np.multiply(self._r_gate, self._r_gate, out=self._tmp)
+        sig += self._tmp
+        np.sqrt(sig, out=sig)
 
     # -- update ---------------------------------------------------------------------------
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
@@ -417,6 +491,8 @@ class KalmanCA(StateEstimator):
                 self.noise_estimator.shift(self._held_e[0])
                 if self._smoother is not None:
                     self._smoother.restart()
+                if self._pgain is not None:
+                    self._pgain.restart()
                 self._start(self._held_t, self._held_q, self._held_qd if vel else None)
                 dt = (t_ns - self._t_ns) * 1e-9
                 f[0, 1] = f[1, 2] = dt
@@ -454,6 +530,8 @@ class KalmanCA(StateEstimator):
             x += self._tmp3
         x += t3
         self._count += 1
+        if self._pgain is not None and not vel:
+            self._pgain.add(q, x[1], x[2])
         if held:  # the noise statistics see the prediction instead of a held joint
             self.noise_estimator.add(t_ns, np.where(gate.held, t3[0], q), qd)
         else:
@@ -468,6 +546,8 @@ class KalmanCA(StateEstimator):
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
         if self.delay_s <= 0.0:
             np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
+            if self._pgain is not None and not vel:
+                self._out[1:] *= self._gain
             self.stamp_ns = t_ns
             if self.gate.pending and self.gate.jump and self._jump_exact:
                 # held beyond the discontinuity threshold: most likely a jump (two movements
@@ -525,14 +605,34 @@ class KalmanCA(StateEstimator):
             ne.position(self._r)
             np.maximum(self._r, self._floor, out=self._r)
             np.copyto(self._r_gate, self._r)  # the gate judges with the noise as measured
+            capped = np.full(self.n, np.inf)
             if not vel and self._wmin > 0.0 and ne.period_s > 0.0 and self.delay_s <= 0.0:
                 # never smooth below the practice's band: cap at the noise whose filter
                 # bandwidth (psd / (r^2 dt))^(1/6) is kalman_min_bandwidth_hz
                 cap = math.sqrt(self.psd / (self._wmin**6 * ne.period_s))
                 white = ne.white(self._tmp)
                 white *= COLOURED_RATIO  # band level above this: coloured, capped
-                np.minimum(np.where(self._r > white, cap, np.inf), self._r, out=self._r)
+                capped[self._r > white] = cap
+                np.minimum(capped, self._r, out=self._r)
                 np.maximum(self._r, self._floor, out=self._r)
+            np.copyto(self._r_eff, self._r)
+            pg = self._pgain
+            if pg is not None and pg.ready and not vel:
+                # the movement's own band, measured: the gain depends on psd / r^2 only, so
+                # a joint whose practice-band jerk has the spectral density s_j is filtered
+                # as the library's psd would filter r sqrt(psd / s_j) (a slow reach: s_j ~100 x
+                # below the library's 3e3); the belief r itself stays the noise as measured
+                r_eff = self._r_gate * np.sqrt(self.psd / np.maximum(pg.jerk_psd(), 1e-6 * self.psd))
+                np.minimum(r_eff, R_EFF_MAX * self._r_gate, out=r_eff)
+                np.minimum(capped, r_eff, out=self._r_eff)
+                np.maximum(self._r_eff, self._floor, out=self._r_eff)
+            # the innovations' prior variance: the groups' (at psd, r_eff) scaled to the joint's
+            # belief r (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2);
+            # r, not the gate's uncapped noise: without the practice gain r_eff = r, scale 1,
+            # and the gate and covariance() are main's (the 7 Hz cap's belief, as before)
+            np.divide(self._r, self._r_eff, out=self._rscale2)
+            self._rscale2 *= self._rscale2
+            self._innovation_std()  # not the groups' recursions: they are converged (still)
             self._armed = moved = True
             self._applied[0] = True
         elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
@@ -551,6 +651,18 @@ class KalmanCA(StateEstimator):
             self._applied[1] = True
         if moved:
             self._regroup(vel, dt)
+        pg = self._pgain
+        if pg is not None and not vel and ne.period_s > 0.0:
+            pg.configure(ne.period_s)  # kernels once per rate
+            np.copyto(self._gain, pg.update_gain())
+            self._pg_residual = pg.residual(pg.gain)
+            if ne.white_evaluations:  # exact or held joints (no white level at all, even with
+                # a fixed noise belief): their q̈ is the input's own, gain 1. Not the gate's
+                # 2 x floor: a real marker elbow reads 0.017 deg there (UE-ADL) and is exactly
+                # the joint whose coloured content above 6 Hz must be calibrated away
+                exact = ne.white(self._tmp) <= EXACT_WHITE * self._floor
+                self._gain[:, exact] = 1.0
+                self._pg_residual[:, exact] = 0.0
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""
@@ -565,7 +677,7 @@ class KalmanCA(StateEstimator):
         if g is not None and len(g.k) == 3 * m and abs(g.dt - dt) <= 1e-3 * dt:
             k = np.array(g.k).reshape(3, m)  # the gain in use: no Riccati solve on a node thread
         else:
-            r = float(self._r.max())
+            r = float(self._r_eff.max())
             k, _ = steady_state(dt, r, float(self._rv.max()) if velocity_given else None, self.psd)
         d = ca_model.qdd_lag(dt, k, velocity_given)
         return {"q": 0.0, "qd": 0.0, "qdd": max(0.0, d - self.delay_s)}

@@ -221,6 +221,21 @@ class StateSource:
         g0 = np.maximum(gi, 0)
         cov = np.einsum("jm,jmc->jc", w, unit[g0])
         dnv = np.einsum("jm,jm->j", w, dvar[g0])
+        pg = est.output_gain() if not velocity_given else None
+        if pg is not None:
+            # the output is (q, g_v qd, g_a qdd) (practice_gain.py, issue 29): the noise part
+            # scaled by the gains, and the scaled estimate's error against the practice as
+            # measured added to the qd, qdd variances (it holds what the shrink leaves)
+            g, res = pg
+            gv, ga = g
+            cov[:, 1] *= gv
+            cov[:, 2] *= ga
+            cov[:, 3] *= gv * gv
+            cov[:, 4] *= gv * ga
+            cov[:, 5] *= ga * ga
+            cov[:, 3] += res[0]
+            cov[:, 5] += res[1]
+            dnv = dnv * ga * ga
         if np.ptp(cov, axis=0).max() <= 1e-15 * max(np.abs(cov).max(), 1e-300):
             self._noise = tuple(float(x) for x in cov[0])  # shared: the propagator's fast path
             self.delta_noise_var = float(dnv[0])
