@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosproc import ros_env, start
+from rosproc import STARTUP_S, ros_env, start
 
 from forearm_dynamics import JOINT_NAMES, build_model, get_movement
 from forearm_dynamics.processes import popen
@@ -55,7 +55,7 @@ def _run_example(name: str, *args: str, timeout: float = 90) -> subprocess.Compl
 def torque_node():
     node = start("torque_node")
     try:
-        assert node.wait_for_output("config on", 30), node.output()
+        assert node.wait_for_output("config on", STARTUP_S), node.output()
         yield node
     finally:
         assert node.stop() == 0, node.output()

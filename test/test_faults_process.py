@@ -78,7 +78,9 @@ class Watch:
                                                stream_qos(10000), raw=True)
         self.diag = Diagnostics(self.peer, "torque_node")
 
-    def wait_torques(self, n: int, timeout: float = 40.0) -> None:
+    def wait_torques(self, n: int, timeout: float = 120.0) -> None:
+        """n more torques (a hang guard: 1.5 s of stream at 1 kHz takes minutes at load 11+
+        on 2 cores only when something is wrong)."""
         start = len(self.torques)
         assert self.peer.spin_until(lambda: len(self.torques) >= start + n, timeout), \
             f"only {len(self.torques) - start} of {n} torques"
@@ -178,8 +180,9 @@ def processed_all_received(output: str) -> int | None:
 def start_pipeline(procs: Procs, tmp: Path, domain: int):
     node = procs.start("torque_node", *NODE_ARGS, domain=domain)
     rec = procs.start("bag_recorder", "-p", f"output:={tmp / 'run.mcap'}", *DEPTH, domain=domain)
-    assert node.wait_for_output("config on", 30), node.output()
-    assert rec.wait_for_output("recording", 30), rec.output()
+    # start-up is imports and a model build: seconds, tens of seconds at load 11 (hang guard)
+    assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
+    assert rec.wait_for_output("recording", rosproc.STARTUP_S), rec.output()
     pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain)
     return node, rec, pub
 
@@ -256,6 +259,9 @@ def test_torque_node_killed_and_restarted(procs, tmp_path) -> None:
         t_kill = time.time_ns()
         watch.peer.spin_for(1.0)
         node2 = procs.start("torque_node", *NODE_ARGS, domain=domain)
+        # up first (its start-up alone took > 40 s at load 11 in a full run: the old single
+        # 40 s wait failed there with 0 torques), then serving
+        assert node2.wait_for_output("config on", rosproc.STARTUP_S), node2.output()
         watch.wait_torques(1500)  # it came back and serves
         diag = watch.diag.fresh()
         # The recorder may discover the new node only at Fast DDS's next participant
@@ -380,7 +386,8 @@ def test_recorder_stopped_at_random_points(procs, tmp_path) -> None:
         node = procs.start("torque_node", *DEPTH, *EXACT, domain=domain)
         ref_path = tmp_path / "reference.mcap"
         ref = procs.start("bag_recorder", "-p", f"output:={ref_path}", *DEPTH, domain=domain)
-        assert node.wait_for_output("config on", 30) and ref.wait_for_output("recording", 30)
+        assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
+        assert ref.wait_for_output("recording", rosproc.STARTUP_S), ref.output()
         pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain)
         watch.wait_torques(300)  # the pipeline runs before the recorders under test join
     finally:

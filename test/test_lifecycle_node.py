@@ -118,7 +118,7 @@ def test_lifecycle_walk_refusal_and_gating(procs) -> None:
         ok, _, _ = sup.transition(Transition.TRANSITION_CONFIGURE)
         assert not ok, "body_size 200 must be refused"
         assert sup.state() == "unconfigured"
-        assert node.wait_for_output("body_size", 30), node.output()
+        assert node.wait_for_output("body_size", rosproc.STARTUP_S), node.output()
         refusal = [ln for ln in node.output().splitlines() if "configure refused" in ln]
         assert len(refusal) == 1 and "body_size" in refusal[0], node.output()
         assert "Traceback" not in node.output()

@@ -52,7 +52,7 @@ def run():
                                   marker_qos())
     pub = None
     try:
-        assert node.wait_for_output("config on", 30), node.output()
+        assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
         # the node's answers are volatile: listen before the first one is sent
         assert peer.spin_until(lambda: torques.get_publisher_count() > 0, rosproc.STARTUP_S), node.output()
         pub = rosproc.start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}",

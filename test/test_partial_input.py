@@ -46,7 +46,7 @@ def drive(node_args, n: int, rate: float = 100.0, names=TWO, wait_outputs: int |
     pub = peer.node.create_publisher(JointState, "joint_states", stream_qos(1000))
     stamps = []
     try:
-        assert node.wait_for_output("config on", 30), node.output()
+        assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
         assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), node.output()
         peer.spin_for(0.5)
         t0 = time.time_ns()
@@ -109,7 +109,7 @@ def test_fixed_rate_output_waits_for_a_warm_estimator() -> None:
     peer.node.create_subscription(JointState, "joint_torques", outs.append, stream_qos(1000))
     pub = peer.node.create_publisher(JointState, "joint_states", stream_qos(1000))
     try:
-        assert node.wait_for_output("config on", 30), node.output()
+        assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
         assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), node.output()
         peer.spin_for(0.5)
         t0 = time.time_ns()

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosproc import BIN, ros_env, start
+from rosproc import BIN, STARTUP_S, ros_env, start
 
 from forearm_dynamics import JOINT_NAMES, build_model, exit_codes, get_movement
 from forearm_dynamics.cli import demo
@@ -26,7 +26,7 @@ def run(tmp_path_factory):
     rec = start("bag_recorder", "-p", f"output:={bag}")
     pub = None
     try:
-        assert node.wait_for_output("config on", 20), node.output()
+        assert node.wait_for_output("config on", STARTUP_S), node.output()
         pub = start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}", "-p", "start_delay:=2.0",
                     "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=30.0")
         assert pub.wait(timeout=90) == 0, pub.output()

@@ -19,7 +19,7 @@ import pytest
 from bagkit import DOMAIN, NS, start_player
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.highlevel import AnyReader
-from rosproc import BIN, ros_env, start
+from rosproc import BIN, STARTUP_S, ros_env, start
 from sensor_msgs.msg import JointState
 
 from forearm_dynamics.bag import BagWriter, TopicQos
@@ -48,8 +48,8 @@ def record(bag, *player_cmd) -> None:
     rec = start("bag_recorder", "-p", f"output:={bag}", "-r", f"__ns:={NS}", domain=DOMAIN)
     player = None
     try:
-        assert node.wait_for_output("config on", 30), node.output()
-        assert rec.wait_for_output("recording", 30), rec.output()
+        assert node.wait_for_output("config on", STARTUP_S), node.output()
+        assert rec.wait_for_output("recording", STARTUP_S), rec.output()
         player = player_cmd[0](*player_cmd[1:])
         assert player.wait(timeout=120) == 0, player.output()
     finally:

@@ -50,7 +50,7 @@ def drive(node_args, names, q, n: int = 60, rate: float = 100.0, imu: bool = Fal
     imu_pub = peer.node.create_publisher(Imu, "upper_arm/imu", stream_qos(1000)) if imu else None
     stamps = []
     try:
-        assert node.wait_for_output("config on", 30), node.output()
+        assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
         assert peer.spin_until(lambda: pub.get_subscription_count() > 0, rosproc.STARTUP_S), node.output()
         if imu_pub is not None:
             assert peer.spin_until(lambda: imu_pub.get_subscription_count() > 0, rosproc.STARTUP_S)

@@ -150,8 +150,8 @@ def _record_while(procs: rosproc.Procs, out: Path, player_bag: Path, player_args
     started = [procs.start(exe, *args) for exe, *args in nodes]
     rec = procs.start("bag_recorder", "-p", f"output:={out}", "-p", f"topics:={TOPICS}")
     for p in started:
-        assert p.wait_for_output("config on", 60), p.output()
-    assert rec.wait_for_output("recording", 60), rec.output()
+        assert p.wait_for_output("config on", rosproc.STARTUP_S), p.output()
+    assert rec.wait_for_output("recording", rosproc.STARTUP_S), rec.output()
     player = _play(procs, player_bag, "-p", "subscriber_timeout:=60.0", "-p", "start_delay:=3.0",
                    *player_args)
     assert player.wait(timeout=180) == 0, player.output()
