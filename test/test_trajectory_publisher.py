@@ -4,6 +4,7 @@ exactly, markers describe each movement, the process exits 0 (or 2 on bad parame
 from __future__ import annotations
 
 import json
+import re
 import signal
 import time
 
@@ -20,6 +21,13 @@ from forearm_dynamics.nodes.trajectory_publisher import marker_qos
 pytestmark = pytest.mark.ros
 
 RATE = 1000.0
+#: the peer's queue: a whole run (movements 1 and 16 at 1 kHz: ~3000 samples) fits, so a test
+#: process starved by load loses nothing (Fast DDS keeps at most 5000 samples per reader)
+PEER_DEPTH = 5000
+#: the publisher waits this long for the test's subscriber (a hang guard: its default, 10 s,
+#: passed before discovery finished in a full run beside another at load 8+, and it then
+#: published to nobody: 0 samples received)
+WAIT_FOR_PEER = ("-p", f"subscriber_timeout:={rosproc.STARTUP_S}")
 
 
 def stamp_ns(msg) -> int:
@@ -36,7 +44,7 @@ def peer():
 def listen(peer: rosproc.Peer) -> tuple[list[JointState], list[dict]]:
     samples: list[JointState] = []
     markers: list[dict] = []
-    peer.node.create_subscription(JointState, "joint_states", samples.append, stream_qos(1000))
+    peer.node.create_subscription(JointState, "joint_states", samples.append, stream_qos(PEER_DEPTH))
     peer.node.create_subscription(String, "movement", lambda m: markers.append(json.loads(m.data)),
                                   marker_qos())
     return samples, markers
@@ -45,9 +53,9 @@ def listen(peer: rosproc.Peer) -> tuple[list[JointState], list[dict]]:
 def test_replays_movements_with_exact_stamps(peer) -> None:
     samples, markers = listen(peer)
     proc = rosproc.start("trajectory_publisher", "-p", "movements:=[1, 16]", "-p", "start_delay:=0.3",
-                         "-p", "body_size:=95")
+                         "-p", "body_size:=95", *WAIT_FOR_PEER)
     try:
-        assert peer.spin_until(lambda: not proc.running(), 30), proc.output()
+        assert peer.spin_until(lambda: not proc.running(), 2 * rosproc.STARTUP_S), proc.output()
         peer.spin_for(0.3)  # whatever is still in flight
     finally:
         rc = proc.stop(signal.SIGKILL)
@@ -68,22 +76,30 @@ def test_replays_movements_with_exact_stamps(peer) -> None:
     for i, m in enumerate(markers):
         mv = get_movement(m["id"])
         mine = [s for s, w in zip(samples, which, strict=True) if w == i]
-        assert abs(len(mine) - mv.duration * RATE) <= 1, (m, len(mine))
+        assert len(mine) <= round(mv.duration * RATE), (m, len(mine))
         t = (np.array([stamp_ns(s) for s in mine]) - m["t0_ns"]) / 1e9
         q, qd, _ = mv.evaluate(t)
         np.testing.assert_allclose([s.position for s in mine], q, rtol=0, atol=1e-12)
         np.testing.assert_allclose([s.velocity for s in mine], qd, rtol=0, atol=1e-12)
     assert all(list(s.name) == list(JOINT_NAMES) and len(s.effort) == 0 for s in samples)
-    # evaluated at the stamp, published at ~1 kHz: spacing close to 1 ms, not exactly
-    assert np.median(np.diff(stamps)) == pytest.approx(1e6, rel=0.05)
+    # every sample it sent arrived, and every sample of the movements was sent or, on a
+    # machine too loaded to keep 1 kHz, skipped and counted (MAX_BURST): the publisher's own
+    # summary. How close to 1 ms the stamps are spaced depends on the machine's load (a
+    # late tick publishes its due samples at once): benchmarks measure that, not this test.
+    done = re.search(r"done: (\d+) samples, (\d+) skipped", proc.output())
+    assert done, proc.output()
+    sent, skipped = int(done.group(1)), int(done.group(2))
+    assert len(samples) == sent, (len(samples), sent)
+    expected = sum(round(get_movement(m["id"]).duration * RATE) for m in markers)
+    assert sent + skipped == expected, (sent, skipped, expected)
 
 
 def test_loop_repeats_until_signalled(peer) -> None:
     _, markers = listen(peer)
     proc = rosproc.start("trajectory_publisher", "-p", "movements:=[3]", "-p", "loop:=true",
-                         "-p", "start_delay:=0.2", "-p", "gap:=0.5", "-p", "rate_hz:=200")
+                         "-p", "start_delay:=0.2", "-p", "gap:=0.5", "-p", "rate_hz:=200", *WAIT_FOR_PEER)
     try:
-        assert peer.spin_until(lambda: len(markers) >= 2, 20), proc.output()
+        assert peer.spin_until(lambda: len(markers) >= 2, rosproc.STARTUP_S), proc.output()
         # The next start is scheduled at t0 + 300 samples x 5 ms + gap, and its marker's t0 is
         # the stamp of its first sample, taken when the timer tick that publishes it runs:
         # never before the schedule (the tick fires from half a period early), later by
@@ -178,13 +194,13 @@ def sensor_run(peer) -> tuple[list[JointState], list[dict], np.ndarray]:
     residuals = published position - analytic position at the stamp)."""
     samples: list[JointState] = []
     markers: list[dict] = []
-    subs = [peer.node.create_subscription(JointState, "joint_states", samples.append, stream_qos(1000)),
+    subs = [peer.node.create_subscription(JointState, "joint_states", samples.append, stream_qos(PEER_DEPTH)),
             peer.node.create_subscription(String, "movement", lambda m: markers.append(json.loads(m.data)),
                                           marker_qos())]
     proc = rosproc.start("trajectory_publisher", "-p", "movements:=[1, 16]", "-p", "start_delay:=0.3",
-                         *SENSOR)
+                         *SENSOR, *WAIT_FOR_PEER)
     try:
-        assert peer.spin_until(lambda: not proc.running(), 30), proc.output()
+        assert peer.spin_until(lambda: not proc.running(), 2 * rosproc.STARTUP_S), proc.output()
         peer.spin_for(0.3)
     finally:
         rc = proc.stop(signal.SIGKILL)
