@@ -263,8 +263,13 @@ class Child:
             try:
                 self.proc.wait(timeout=timeout)
             except subprocess.TimeoutExpired:
+                # our nodes dump every thread's Python stack on SIGUSR1 (nodes/common.run):
+                # where it hangs, in its stderr, before the kill
+                self.proc.send_signal(signal.SIGUSR1)
+                time.sleep(1.0)
                 self.proc.kill()
                 self.proc.wait(timeout=10)
                 if strict:
-                    raise
+                    raise subprocess.TimeoutExpired(
+                        self.argv, timeout, output=self.text()[-6000:]) from None
         return self.proc.returncode

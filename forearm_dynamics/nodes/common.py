@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import faulthandler
 import gc
 import signal
 import sys
@@ -168,6 +169,8 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
     base class (the class itself lives in rclpy's private extension module).
     """
     hold_stop_signals()
+    # `kill -USR1 <pid>`: every thread's Python stack on stderr (where a node hangs)
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RuntimeError as exc:  # an unreadable --params-file or malformed --ros-args
