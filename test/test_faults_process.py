@@ -405,7 +405,7 @@ def test_recorder_stopped_at_random_points(procs, tmp_path) -> None:
             _send(rec, sig)
         else:
             due[k] = None
-    deadline, polled = time.monotonic() + 120, 0.0  # a hang guard
+    deadline, polled = time.monotonic() + rosproc.STARTUP_S, 0.0  # a hang guard
     while due:  # stop each at its random point
         assert time.monotonic() < deadline, "recorders never recorded a torque"
         poll = time.monotonic() >= polled + 0.25  # reading the files: not every 5 ms
