@@ -252,21 +252,24 @@ class Child:
         except subprocess.TimeoutExpired:
             return None
 
-    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0, strict: bool = False) -> int:
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0, strict: bool = False,
+             dump: bool = False) -> int:
         """Signal this process only; SIGKILL if it has not exited after `timeout` s.
 
         The exit code (-9 after a SIGKILL); with `strict`, a hang raises TimeoutExpired
         once the process is killed (a node that ignores SIGINT is a bug a test must see).
+        `dump`: the process is one of our nodes, which print every thread's Python stack on
+        SIGUSR1 (nodes/common.run): sent before the kill, so its output says where it hung
+        (any other process would die of SIGUSR1 instead of SIGKILL).
         """
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
             try:
                 self.proc.wait(timeout=timeout)
             except subprocess.TimeoutExpired:
-                # our nodes dump every thread's Python stack on SIGUSR1 (nodes/common.run):
-                # where it hangs, in its stderr, before the kill
-                self.proc.send_signal(signal.SIGUSR1)
-                time.sleep(1.0)
+                if dump:
+                    self.proc.send_signal(signal.SIGUSR1)
+                    time.sleep(1.0)
                 self.proc.kill()
                 self.proc.wait(timeout=10)
                 if strict:

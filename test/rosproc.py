@@ -121,7 +121,7 @@ class NodeProcess(Child):
 
         60 s is a hang guard (the wait ends when the process does): a node took 19 s to
         exit at load 27, and a SIGKILL after 10 s would fail a correct node."""
-        return super().stop(sig, timeout, strict=True)
+        return super().stop(sig, timeout, strict=True, dump=self.argv[0].startswith(str(BIN)))
 
 
 def start(executable: str, *ros_args: str, domain: int | None = None) -> NodeProcess:
