@@ -21,8 +21,8 @@ for running); and the ratio to the causal 6 Hz Butterworth (the node's `butterwo
 estimator, cutoff 6 Hz) on the same window. Estimators: `kalman` (the node's default,
 causal), `kalman` with delay_s 0.05, 0.1, 0.2, `butterworth` 6 Hz, and `kalman_practice_gain`
 (issue 29's opt-in practice gain, causal: practice_band_hz 6, kalman_min_bandwidth_hz 0;
-not in the targets, which are the default's). Medians and worst
-cases per half over every (recording, DOF) series. `bag_torques_max_dev_nm`: the largest
+not in the targets, which are the default's) and `selector` (opt-in, estimation/selector.py).
+Medians and worst cases per half over every (recording, DOF) series. `bag_torques_max_dev_nm`: the largest
 difference between `bag_torques`' offline computation (offline/torques.compute) and the
 node's outputs at equal stamps (0 when bag_torques stamps delayed estimates as the node),
 on the first `--bag-check` recordings of each half.
@@ -67,6 +67,8 @@ ESTIMATORS = {
     "butterworth": ("butterworth", {"butterworth_cutoff_hz": 6.0}),
     # issue 29's opt-in practice gain, causal (kalman.py: practice_band_hz, the measured setting)
     "kalman_practice_gain": ("kalman", {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}),
+    # opt-in: per joint kalman or 0.75 practice gain + 0.25 Butterworth, judged online (selector.py)
+    "selector": ("selector", {}),
 }
 BASELINE = "butterworth"
 MOBL = {"elbow_flexion": "elbow_flexion", "pro_sup": "pro_sup", "wrist_flexion": "flexion",
@@ -175,6 +177,11 @@ def _stats(xs) -> dict:
     return {"median": float(np.median(xs)), "worst": float(np.max(xs)), "n": len(xs)}
 
 
+def _labels(rs: list[dict]) -> list[str]:
+    """The estimators every recording was scored with (an older output lacks a newer label)."""
+    return [label for label in ESTIMATORS if all(label in r["estimators"] for r in rs)]
+
+
 def summary(recs: list[dict]) -> dict:
     """Per half: per estimator, over every (recording, DOF) series: median and worst of the
     ratio to the Butterworth and of the NRMSE, settled and in the first second; the series
@@ -187,7 +194,7 @@ def summary(recs: list[dict]) -> dict:
         h = {"recordings": len(rs), "series": sum(len(r["joints"]) for r in rs),
              "sources": sorted({r["source"] for r in rs}), "subjects": len({r["subject"] for r in rs}),
              "all_raw": all(r["raw"] for r in rs), "estimators": {}}
-        for label in ESTIMATORS:
+        for label in _labels(rs):
             e = {}
             for win in ("settled", "first_second"):
                 ratios = [r["estimators"][label][f"ratio_{win}"][j] for r in rs for j in r["joints"]]
@@ -226,7 +233,7 @@ def summary(recs: list[dict]) -> dict:
             h["per_source"][src] = {
                 label: {win: _stats([r["estimators"][label][f"ratio_{win}"][j]
                                      for r in sr for j in r["joints"]])
-                        for win in ("settled", "first_second")} for label in ESTIMATORS}
+                        for win in ("settled", "first_second")} for label in _labels(rs)}
         h["targets"] = targets(rs, h)
         out[half] = h
     return out
@@ -333,7 +340,7 @@ def docs_table(res: dict) -> str:
         h = res["summary"].get(half)
         if h is None:
             continue
-        for label in ESTIMATORS:
+        for label in (x for x in ESTIMATORS if x in h["estimators"]):
             e = h["estimators"][label]
             s, f = e["settled"], e["first_second"]
             nr = s["nrmse"]
