@@ -71,6 +71,7 @@ ESTIMATORS = {
     "selector": ("selector", {}),
 }
 BASELINE = "butterworth"
+BAG_CHECK = 4  # recordings per half whose bag_torques computation is compared with the node's
 MOBL = {"elbow_flexion": "elbow_flexion", "pro_sup": "pro_sup", "wrist_flexion": "flexion",
         "wrist_deviation": "deviation"}
 
@@ -277,7 +278,8 @@ def run(args) -> dict:
         recs = [_job(j) for j in jobs]
     cmd = "python benchmarks/real_corpus.py" + (" --opensim-models DIR" if args.opensim_models else "")
     return {"command": cmd
-            + (f" --jobs {args.jobs}" if args.jobs > 1 else ""),
+            + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
+            + (f" --bag-check {args.bag_check}" if args.bag_check != BAG_CHECK else ""),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": f"{os.cpu_count()} cores",
             "loadavg_start": load0, "loadavg_end": list(os.getloadavg()),
             "wall_time_s": time.perf_counter() - t0, "settle_s": realscore.SETTLE_S,
@@ -468,9 +470,9 @@ def main(argv=None) -> int:
                     help="checkout or mirror of opensim-org/opensim-models (its running trials)")
     ap.add_argument("--halves", default="tuning,held_out", type=lambda s: s.split(","))
     ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--bag-check", type=int, default=4, metavar="N",
+    ap.add_argument("--bag-check", type=int, default=BAG_CHECK, metavar="N",
                     help="compare bag_torques' computation with the node's outputs on the first N "
-                         "recordings of each half (default 4)")
+                         f"recordings of each half (default {BAG_CHECK})")
     ap.add_argument("--limit", type=int, default=0, help="first N recordings only (a quick look)")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--figure", type=Path, default=HERE / "real_corpus.png")
