@@ -321,7 +321,7 @@ def test_a_regrouped_group_is_seated_near_the_steady_state_of_its_new_noise(rate
     low rates); scaled by s^2 (the seat before issue 29's fix) the q̈ gain was 34-49 % off
     for one bin (s = sqrt 2, 1/2) and 2-3x for the 4 bins the measured jerk level moves a
     still joint (r_eff = 4 r)."""
-    from forearm_dynamics.estimation.kalman import _rescaled
+    from forearm_dynamics.estimation.noise_groups import _rescaled
 
     dt, psd, r = 1.0 / rate, 3e3, math.radians(0.3)
     seat = _rescaled(ca_model.steady_posterior(dt, r, None, psd), s, False)
