@@ -24,7 +24,9 @@ from forearm_dynamics.estimation import make_estimator
 CASES = (("1 kHz, velocities, default", 1000.0, True, {}),
          ("100 Hz, positions, default", 100.0, False, {}),
          ("100 Hz, positions, practice gain (opt-in)", 100.0, False,
-          {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}))
+          {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}),
+         ("1 kHz, velocities, delay 0.05 s", 1000.0, True, {"delay_s": 0.05}),
+         ("100 Hz, positions, delay 0.05 s", 100.0, False, {"delay_s": 0.05}))
 
 
 def run(rate: float, vel: bool, settings: dict, seconds: float, n: int) -> np.ndarray:
