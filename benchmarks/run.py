@@ -1,7 +1,7 @@
 """`make bench`: every performance figure of the package, measured on this machine in one run.
 
     python -m benchmarks [--out benchmarks/results.json] [--quick]
-                         [--sections compute,torque,choices,recorder,offline]
+                         [--sections compute,torque,choices,recorder,offline] [--choices a,b]
 
 Run from the repository root. Prints a table and updates a JSON file: the sections of
 this run replace theirs, every other top-level key (e.g. another benchmark's section) is
@@ -83,6 +83,11 @@ CHOICE_MOVEMENTS = 6  # 9 s per choice variant
 CHOICE_START_DELAY = 1.0  # s: streaming reaches the ~3 s-after-start window (see choices)
 
 
+#: trajectory_publisher as a motion-capture-like sensor: positions only, white noise (issue 29
+#: item 5 measures the estimator's cost in the node on such input, not only on exact input)
+POSITIONS_ONLY = ["-p", "publish_velocity:=false", "-p", "noise_deg:=0.3"]
+
+
 def choices() -> list[tuple[Variant, str]]:
     """Alternatives measured against the defaults (torque_node, events, reliable 1000, default transport)."""
     shm = str(config_file("fastdds_shm.xml"))
@@ -104,6 +109,10 @@ def choices() -> list[tuple[Variant, str]]:
          "every process: RMW_FASTRTPS_PUBLICATION_MODE=ASYNCHRONOUS"),
         (Variant("pinned", pin=True),
          "torque_node alone on the last CPU (affinity), publisher and receiver on the others"),
+        (Variant("positions_kalman", pub_args=POSITIONS_ONLY),
+         "positions only, 0.3 deg noise (a motion-capture-like input), the default kalman"),
+        (Variant("positions_backward", node_args=["-p", "estimator:=backward"], pub_args=POSITIONS_ONLY),
+         "positions only, 0.3 deg noise, the backward-difference estimator (the kalman's cost there)"),
     ]
 
 
@@ -156,10 +165,12 @@ def torque_section(domain: int, work: Path, quick: bool) -> dict:
     return out
 
 
-def choices_section(domain: int, work: Path) -> dict:
+def choices_section(domain: int, work: Path, only: set[str] | None = None) -> dict:
     movements = list(range(1, CHOICE_MOVEMENTS + 1))
     out: dict = {"movements": len(movements), "start_delay_s": CHOICE_START_DELAY, "variants": {}}
     for v, what in choices():
+        if only and v.name not in only:
+            continue
         _say(f"choices: {v.name} ({what}) ...")
         v.name = f"choice_{v.name}"
         try:
@@ -307,6 +318,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sections", default=",".join(SECTIONS))
     env_domain = int(os.environ.get("ROS_DOMAIN_ID") or 0)
     ap.add_argument("--domain", type=int, default=env_domain or 75)
+    ap.add_argument("--choices", default="",
+                    help="comma-separated choice variants to run (default: all; names in choices())")
     ap.add_argument("--keep", action="store_true", help="keep the logs and bags (path printed)")
     args = ap.parse_args(argv)
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
@@ -332,7 +345,8 @@ def main(argv: list[str] | None = None) -> int:
             res["torque_path"] = torque_section(args.domain, work, args.quick)
         if "choices" in sections:
             res["choices"] = ({"skipped": "quick mode", "variants": {}} if args.quick
-                              else choices_section(args.domain, work))
+                              else choices_section(args.domain, work,
+                                                   set(filter(None, args.choices.split(",")))))
         if "recorder" in sections:
             _say("recorder ...")
             steps = ((1000, 1), (2000, 0.5)) if args.quick else \

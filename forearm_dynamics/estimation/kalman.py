@@ -1,8 +1,10 @@
 """Kalman filter with a white-jerk (constant-acceleration) model, per-joint noise.
 
 The parts, each in its own module and tested alone: the model and its discretisation
-(ca_model.py), the per-joint noise estimator (noise.py), the jump gate (gate.py) and the
-fixed-lag smoother (smoother.py). This module is the filter that wires them.
+(ca_model.py), the per-joint noise estimator (noise.py), the jump gate (gate.py), the
+fixed-lag smoother (smoother.py), and two mixins of the filter: its noise groups and their
+covariance recursions (noise_groups.py) and its per-joint noise belief (noise_belief.py).
+This module is the filter that wires them.
 
 Filter: state X = [q; qd; qdd] (3, n); per sample X = F X (predict), X += K (.) E (correct
 with the innovations E; K per joint). The gain of a joint depends on dt, the psd and its own
@@ -61,7 +63,8 @@ back to back jump 0.39-2.3 rad: the old posture for one sample was a pipeline er
 (a 20 deg marker swap) still outputs the prediction.
 
 Delay (estimator.delay_s, 0 = causal): the output is the fixed-lag smoothed estimate of the
-sample delay_s back (round(delay_s / dt) samples at the first step's dt), stamped with that
+sample delay_s back (round(delay_s / dt) samples at the stream's nominal period: jitter does
+not change the count, a new rate does and loses no sample), stamped with that
 sample's stamp (`stamp_ns`); nothing is output until the smoother has it (stamp_ns None).
 
 Lag (causal): the model is exact for constant acceleration, so q and qd have no delay at
@@ -82,7 +85,6 @@ white noise (the noise estimate is unbiased there, as the first version's was).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -92,73 +94,16 @@ from .ca_model import process_noise, steady_state, transition  # noqa: F401 - pu
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
 from .noise import NoiseEstimator
+from .noise_belief import NoiseBelief
+from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
 from .practice_gain import PracticeGain
 from .smoother import FixedLagSmoother
 
 NOISE_EVERY_S = 0.25
-BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
-HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
 MAX_DELAY_S = 0.2
-EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
-COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
-#: the measured jerk level may narrow a joint's filter by at most this factor on its noise
-#: (bandwidth x R_EFF_MAX^(-1/3)): a slow movement that speeds up, or a gap, is followed
-R_EFF_MAX = 4.0
-# the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
-# a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
-WHITE_ARM_EVALUATIONS = 25
 
 
-def _summary(r: np.ndarray, floor: float) -> float:
-    above = r[r > floor * 1.0001]
-    return float(np.median(above)) if len(above) else float(r.max())
-
-
-#: how each posterior element (p00, p01, p02, p11, p12, p22) of a positions-only filter scales
-#: with its noise r at a fixed psd: the continuous-time limit P_ij ~ R w^(i + j + 1), R = r^2 dt,
-#: bandwidth w = (psd / R)^(1/6), so P_ij ~ r^(2 - (i + j + 1) / 3)
-_SEAT_POWERS = (5 / 3, 4 / 3, 1.0, 1.0, 2 / 3, 1 / 3)
-
-
-def _rescaled(p: tuple, s: float, vel: bool) -> tuple:
-    """A converged posterior p at noise r, moved to the noise s r: near the steady state there
-    (positions only: each element by its own power of s, _SEAT_POWERS). Scaled by s^2 for all
-    elements (the old seat) it was 11 % off in the q̈ lag at 1 kHz and, since issue 29's
-    measured jerk level narrows a still joint's filter (r_eff up to 4 r), took ~150 samples
-    to settle; with velocities the gain depends on two noises: s^2 (a step of one bin)."""
-    if vel:
-        return tuple(x * s * s for x in p)
-    return tuple(x * s**e for x, e in zip(p, _SEAT_POWERS))
-
-
-@dataclass(frozen=True)
-class NoiseGroup:
-    """Joints `idx` filtered with one noise level (r, r_v; r_v None without velocities):
-    the gain (3, m) and prior covariance M (3, 3) of the last step, at period dt."""
-
-    idx: np.ndarray
-    r: float
-    r_v: float | None
-    gain: np.ndarray
-    prior: np.ndarray
-    dt: float
-
-
-class _Group:
-    """Joints that share a noise level: one covariance recursion."""
-
-    __slots__ = ("M", "P", "dt", "idx", "k", "key", "r", "rv", "still")
-
-    def __init__(self, key: tuple[int, int], r: float, rv: float, idx: np.ndarray):
-        self.key, self.r, self.rv, self.idx = key, r, rv, idx
-        self.P: tuple | None = None
-        self.M: tuple = (0.0,) * 6
-        self.k: tuple = ()
-        self.dt = -1.0
-        self.still = False
-
-
-class KalmanCA(StateEstimator):
+class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
     """White-jerk Kalman filter, per-joint noise; see the module docstring."""
 
     name = "kalman"
@@ -253,10 +198,6 @@ class KalmanCA(StateEstimator):
     def outliers(self) -> int:
         return self.gate.outliers
 
-    def noise_per_joint(self) -> np.ndarray:
-        """The position noise std each joint believes (rad), (n,) copy."""
-        return self._r.copy()
-
     def output_gain(self) -> tuple[np.ndarray, np.ndarray] | None:
         """With the practice gain on (causal, positions only): ((2, n) the gains applied to
         (qd, qdd), (2, n) the mean square error of the scaled (qd, qdd) against the practice
@@ -276,74 +217,10 @@ class KalmanCA(StateEstimator):
         out *= self._X[1:]
         return out
 
-    def gain_noise_per_joint(self) -> np.ndarray:
-        """The noise each joint's gain is computed with (rad), (n,) copy: the belief times
-        sqrt(kalman_jerk_psd / the joint's measured jerk density) (practice_gain.py), capped."""
-        return self._r_eff.copy()
-
-    def noise(self) -> float | None:
-        """One summary of the believed position noise (rad): the median over the joints
-        above the floor (the measured ones; held and exact joints believe the floor), or
-        the floor. Each joint's own: noise_per_joint()."""
-        return _summary(self._r, self._floor)
-
-    def velocity_noise(self) -> float | None:
-        return _summary(self._rv, self._floor)
-
     @property
     def period_s(self) -> float:
         """The last sample period (s) the filter stepped with."""
         return self._dt
-
-    @property
-    def groups_version(self) -> int:
-        """Changes whenever the noise groups (levels, members, velocity mode) change."""
-        return self._groups_version
-
-    def noise_groups(self) -> list[NoiseGroup]:
-        """The groups of joints sharing a noise level and a gain, as the last step used them
-        (for torque uncertainty: issue 19's state_source reads these, nothing private)."""
-        out = []
-        for g in self._groups:
-            if g.P is None or not g.k:
-                continue
-            m = len(g.k) // 3
-            out.append(NoiseGroup(g.idx.copy(), g.r, g.rv if m == 2 else None,
-                                  np.array(g.k).reshape(3, m), ca_model.to_matrix(g.M), g.dt))
-        return out
-
-    def measured_noise(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per joint (position, velocity) noise variances as measured, BEFORE the floor (the
-        floor keeps the gain sane on exact input; it is a belief, not noise that is there);
-        the fixed values where set, the default belief before the first estimate."""
-        ne = self.noise_estimator
-        r2 = self._r**2
-        rv2 = self._rv**2
-        if self._fixed_r is None and ne.ready:
-            r2 = ne.position(np.zeros(self.n)) ** 2
-        if self._fixed_rv is None and ne.velocity_ready:
-            rv2 = ne.velocity(np.zeros(self.n)) ** 2
-        return r2, rv2
-
-    def noise_known(self, velocity_given: bool) -> bool:
-        """Whether the noise the filter runs with is measured (or fixed), not the default
-        belief it starts with: the estimate needs ~0.3-0.5 s of samples (noise.py) and is
-        applied at the next noise update (every NOISE_EVERY_S), longer than the state's
-        warm-up; until then the gain, hence the error, is that of a guess."""
-        known = self._fixed_r is not None or self._applied[0]
-        if velocity_given:
-            known = known and (self._fixed_rv is not None or self._applied[1])
-        return known
-
-    def noiseless(self) -> np.ndarray:
-        """(n,) bool: joints whose white level (third differences of consecutive samples,
-        near Nyquist, where no movement is) is within 2 x the floor: exact or held input,
-        the jump gate's rule for exact input; their 10 Hz level is the movement's own
-        content, not noise. None with the noise fixed (kalman_noise_deg > 0) or before the
-        first white-level estimate."""
-        if self._fixed_r is not None or not self.noise_estimator.white_evaluations:
-            return np.zeros(self.n, bool)
-        return self.noise_estimator.white(np.empty(self.n)) <= 2.0 * self._floor
 
     def covariance(self) -> np.ndarray:
         """Posterior covariance of (q, qd, qdd) per joint, (n, 3, 3), of the estimate in
@@ -379,92 +256,6 @@ class KalmanCA(StateEstimator):
             x[1].fill(0.0)
         x[2].fill(0.0)
         self._count = 1
-
-    # -- groups -----------------------------------------------------------------------------
-    def _regroup(self, vel: bool, dt: float) -> None:
-        """Bin each joint's noise (hysteresis) and rebuild the groups if the bins changed."""
-        changed = vel != self._vel
-        for row, r in ((0, self._r_eff), (1, self._rv)):
-            if row == 1 and not vel:
-                if (self._bins[1] != 0).any():
-                    self._bins[1].fill(0)
-                    changed = True
-                continue
-            pos = np.log(np.maximum(r, 1e-300) / self._floor) / BIN
-            cur = self._bins[row]
-            move = np.abs(pos - cur) > 0.5 + (HYSTERESIS - 0.5) * (cur > -10**5)
-            if move.any():
-                cur[move] = np.rint(pos[move]).astype(int)
-                changed = True
-        if not changed and self._groups:
-            return
-        old = {g.key: g for g in self._groups}
-        keys: dict[tuple[int, int], list[int]] = {}
-        for j in range(self.n):
-            keys.setdefault((int(self._bins[0, j]), int(self._bins[1, j])), []).append(j)
-        groups = []
-        for i, (key, idx) in enumerate(sorted(keys.items())):
-            r = self._floor * math.exp(key[0] * BIN) if self._fixed_r is None else self._fixed_r
-            rv = (self._floor * math.exp(key[1] * BIN) if self._fixed_rv is None else self._fixed_rv)
-            g = old.get(key) if vel == self._vel else None
-            if g is None:
-                g = _Group(key, r, rv, np.array(idx, np.intp))
-            else:
-                g.idx = np.array(idx, np.intp)
-            self._gidx[g.idx] = i
-            groups.append(g)
-        self._groups = groups
-        self._groups_version += 1
-        self._vel = vel
-        self._Kg = np.zeros((6, len(groups)))
-        self._Sg = np.zeros(len(groups))
-        for g in groups:
-            g.still = False
-            if g.P is None:  # seat it: scaled from the group its first joint was in, else solved
-                prev = next((o for o in old.values() if g.idx[0] in o.idx and o.P is not None), None)
-                if prev is not None and vel == self._vel_seat:
-                    g.P = _rescaled(prev.P, g.r / prev.r, vel)
-                else:
-                    g.P = ca_model.steady_posterior(dt, g.r, g.rv if vel else None, self.psd)
-        self._vel_seat = vel
-        if self._smoother is not None:
-            self._smooth_dt = 0.0  # new gains at the next step
-
-    def _covariance_step(self, dt: float, vel: bool) -> None:
-        """Each group's recursion at dt; the per-joint gains and innovation stds."""
-        changed = False
-        kg, sg = self._Kg, self._Sg
-        for i, g in enumerate(self._groups):
-            if g.still and dt == g.dt:
-                continue
-            m = ca_model.prior(g.P, dt, self.psd)
-            r2 = g.r * g.r
-            k, p = ca_model.measurement_update(m, r2, g.rv * g.rv if vel else None)
-            old = g.P
-            g.still = dt == g.dt and all(abs(a - b) <= 1e-12 * abs(a) + 1e-300 for a, b in zip(p, old))
-            g.P, g.M, g.k, g.dt = p, m, k, dt
-            if vel:
-                kg[0, i], kg[3, i], kg[1, i], kg[4, i], kg[2, i], kg[5, i] = k
-            else:
-                kg[0, i], kg[1, i], kg[2, i] = k
-            sg[i] = m[0]
-            changed = True
-        if changed:
-            gi = self._gidx
-            np.take(kg[:3], gi, axis=1, out=self._Kp)
-            if vel:
-                np.take(kg[3:], gi, axis=1, out=self._Kv)
-            self._innovation_std()
-
-    def _innovation_std(self) -> None:
-        """Per joint innovation std with the noise as measured: the group's prior variance
-        scaled to the joint's own ((r / r_eff)^2) plus r^2."""
-        sig = self._sig
-        np.take(self._Sg, self._gidx, out=sig)
-        sig *= self._rscale2
-        np.multiply(self._r_gate, self._r_gate, out=self._tmp)
-        sig += self._tmp
-        np.sqrt(sig, out=sig)
 
     # -- update ---------------------------------------------------------------------------
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
@@ -581,88 +372,32 @@ class KalmanCA(StateEstimator):
         return False
 
     def _configure_smoother(self, dt: float, vel: bool) -> None:
-        """Lag gains per joint from each group's converged filter at dt (Riccati solves:
-        at the start and when the groups change, a few times per stream)."""
-        lags = max(1, round(self.delay_s / dt))
-        if self._smoother is None or self._smoother.lags != lags:
+        """Lag gains per joint from each group's converged filter at the stream's nominal
+        period (the noise estimator's; dt before it has one).
+
+        The nominal period, not the last step's: on jittered stamps the last dt moved the lag
+        count (round(delay_s / dt): 0.05 s is 36-83 samples at 0.6-1.4 ms) at every regroup,
+        and a new smoother dropped what the old one held (1 732 of 20 000 samples never
+        output; test_estimation_parts). A real rate change makes a new smoother that first
+        outputs what the old one held. The gains are ca_model.lag_gains' cache of the
+        steady state per (period, noise bin): a regroup costs a lookup per group, not a
+        Riccati solve and `lags` matrix products (2.7 ms median at 1 kHz, on the callback)."""
+        nominal = self.noise_estimator.period_s or dt
+        lags = max(1, round(self.delay_s / nominal))
+        old = self._smoother
+        if old is None or old.lags != lags:
             self._smoother = FixedLagSmoother(self.n, lags)
+            if old is not None:
+                self._smoother.take_over(old)
         m = 2 if vel else 1
         gains = np.zeros((lags + 1, 3, m, self.n))
         cov = np.zeros((self.n, 3, 3))
         for g in self._groups:
-            k, c = ca_model.lag_gains(dt, g.r, g.rv if vel else None, self.psd, lags,
-                                      g.M if g.dt == dt else None)
+            k, c = ca_model.lag_gains(nominal, g.r, g.rv if vel else None, self.psd, lags)
             gains[:, :, :, g.idx] = k[:, :, :, None]
             cov[g.idx] = c
         self._smoother.set_gains(gains, cov)
         self._smooth_dt = dt
-
-    # -- online noise ---------------------------------------------------------------------
-    def _update_noise(self, vel: bool, dt: float) -> None:
-        ne = self.noise_estimator
-        moved = False
-        if self._fixed_r is None and ne.ready:
-            ne.position(self._r)
-            np.maximum(self._r, self._floor, out=self._r)
-            np.copyto(self._r_gate, self._r)  # the gate judges with the noise as measured
-            capped = np.full(self.n, np.inf)
-            if not vel and self._wmin > 0.0 and ne.period_s > 0.0 and self.delay_s <= 0.0:
-                # never smooth below the practice's band: cap at the noise whose filter
-                # bandwidth (psd / (r^2 dt))^(1/6) is kalman_min_bandwidth_hz
-                cap = math.sqrt(self.psd / (self._wmin**6 * ne.period_s))
-                white = ne.white(self._tmp)
-                white *= COLOURED_RATIO  # band level above this: coloured, capped
-                capped[self._r > white] = cap
-                np.minimum(capped, self._r, out=self._r)
-                np.maximum(self._r, self._floor, out=self._r)
-            np.copyto(self._r_eff, self._r)
-            pg = self._pgain
-            if pg is not None and pg.ready and not vel:
-                # the movement's own band, measured: the gain depends on psd / r^2 only, so
-                # a joint whose practice-band jerk has the spectral density s_j is filtered
-                # as the library's psd would filter r sqrt(psd / s_j) (a slow reach: s_j ~100 x
-                # below the library's 3e3); the belief r itself stays the noise as measured
-                r_eff = self._r_gate * np.sqrt(self.psd / np.maximum(pg.jerk_psd(), 1e-6 * self.psd))
-                np.minimum(r_eff, R_EFF_MAX * self._r_gate, out=r_eff)
-                np.minimum(capped, r_eff, out=self._r_eff)
-                np.maximum(self._r_eff, self._floor, out=self._r_eff)
-            # the innovations' prior variance: the groups' (at psd, r_eff) scaled to the joint's
-            # belief r (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2);
-            # r, not the gate's uncapped noise: without the practice gain r_eff = r, scale 1,
-            # and the gate and covariance() are main's (the 7 Hz cap's belief, as before)
-            np.divide(self._r, self._r_eff, out=self._rscale2)
-            self._rscale2 *= self._rscale2
-            self._innovation_std()  # not the groups' recursions: they are converged (still)
-            self._armed = moved = True
-            self._applied[0] = True
-        elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
-            # no 10 Hz estimate yet (a stream whose timer stalls restarts it at every stall and
-            # may never get one): the gate judges with the white level, measured in a few
-            # samples, rather than stay unarmed and let every jump ring through the filter
-            ne.white(self._r_gate)
-            np.maximum(self._r_gate, self._floor, out=self._r_gate)
-            for g in self._groups:
-                g.still = False  # the innovation stds again at the next step
-            self._armed = True
-        if vel and self._fixed_rv is None and ne.velocity_ready:
-            ne.velocity(self._rv)
-            np.maximum(self._rv, self._floor, out=self._rv)
-            moved = True
-            self._applied[1] = True
-        if moved:
-            self._regroup(vel, dt)
-        pg = self._pgain
-        if pg is not None and not vel and ne.period_s > 0.0:
-            pg.configure(ne.period_s)  # kernels once per rate
-            np.copyto(self._gain, pg.update_gain())
-            self._pg_residual = pg.residual(pg.gain)
-            if ne.white_evaluations:  # exact or held joints (no white level at all, even with
-                # a fixed noise belief): their q̈ is the input's own, gain 1. Not the gate's
-                # 2 x floor: a real marker elbow reads 0.017 deg there (UE-ADL) and is exactly
-                # the joint whose coloured content above 6 Hz must be calibrated away
-                exact = ne.white(self._tmp) <= EXACT_WHITE * self._floor
-                self._gain[:, exact] = 1.0
-                self._pg_residual[:, exact] = 0.0
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""

@@ -28,7 +28,7 @@ the candidate with the lower error; it changes only when the other's error is be
 cross-fade over FADE_S (no jump in the output). A joint starts on the blend as soon as the
 Kalman filter has measured its white level.
 
-Exact and held joints (white level under kalman.EXACT_WHITE x the noise floor) and every
+Exact and held joints (white level under noise_belief.EXACT_WHITE x the noise floor) and every
 joint of a stream with velocities stay on the default Kalman filter: the practice is not
 the truth for fast movements with exact input (the library's 0.5 s movements), and the
 blend's Butterworth part lags 37 ms.
@@ -54,7 +54,8 @@ import numpy as np
 
 from .base import StateEstimator
 from .butterworth import ButterworthDifference
-from .kalman import EXACT_WHITE, KalmanCA
+from .kalman import KalmanCA
+from .noise_belief import EXACT_WHITE
 from .practice_gain import practice_kernels
 
 BLEND = 0.75  # weight of the practice-gain Kalman in the blend (the rest: the Butterworth)
@@ -79,7 +80,8 @@ class PracticeSelector(StateEstimator):
         self.kalman = KalmanCA(n, {})
         self.practice_gain = KalmanCA(n, dict(PRACTICE_GAIN))
         self.butterworth = ButterworthDifference(n, {"butterworth_cutoff_hz": PRACTICE_HZ})
-        self._floor = math.radians(KalmanCA.settings[3].default)  # kalman_noise_floor_deg
+        self._floor = math.radians(next(s.default for s in KalmanCA.settings
+                                        if s.name == "kalman_noise_floor_deg"))
         self._blend = np.zeros((3, n))
         self._tmp = np.zeros((3, n))
         self._white = np.zeros(n)

@@ -65,6 +65,13 @@ class FixedLagSmoother:
             self._queue.append((self._T[slot], self._S[slot].copy()))
         self._count = 0
 
+    def take_over(self, old: FixedLagSmoother) -> None:
+        """Start with what `old` (a smoother for another lag count: a new sample rate) still
+        holds, queued as final, so no sample is lost at the change."""
+        old.restart()
+        self._queue.extend(old._queue)
+        old._queue.clear()
+
     def push(self, t_ns: int, x: np.ndarray, e: np.ndarray) -> bool:
         """Filtered state x (3, n) of the sample at t_ns and its innovations e (m, n) (zero rows
         for the first sample); True if an output (self.out, self.stamp_ns) is ready."""

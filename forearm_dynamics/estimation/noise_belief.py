@@ -1,0 +1,149 @@
+"""The Kalman filter's noise belief per joint: what it measures, caps and applies.
+
+Why apart from the filter (kalman.py): the belief is where the filter meets the data
+(noise.py's estimates every NOISE_EVERY_S, the 7 Hz cap for coloured noise, issue 29's
+practice gain), and where the σ reads what the filter believes (measured_noise, noiseless,
+noise_known). `NoiseBelief` is a mixin of KalmanCA; the reasons for each rule are in
+kalman.py's module docstring.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
+COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
+#: the measured jerk level may narrow a joint's filter by at most this factor on its noise
+#: (bandwidth x R_EFF_MAX^(-1/3)): a slow movement that speeds up, or a gap, is followed
+R_EFF_MAX = 4.0
+# the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
+# a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
+WHITE_ARM_EVALUATIONS = 25
+
+
+def _summary(r: np.ndarray, floor: float) -> float:
+    above = r[r > floor * 1.0001]
+    return float(np.median(above)) if len(above) else float(r.max())
+
+
+class NoiseBelief:
+    """Mixin of KalmanCA: the per-joint noise it believes and its online update."""
+
+    def noise_per_joint(self) -> np.ndarray:
+        """The position noise std each joint believes (rad), (n,) copy."""
+        return self._r.copy()
+
+    def gain_noise_per_joint(self) -> np.ndarray:
+        """The noise each joint's gain is computed with (rad), (n,) copy: the belief times
+        sqrt(kalman_jerk_psd / the joint's measured jerk density) (practice_gain.py), capped."""
+        return self._r_eff.copy()
+
+    def noise(self) -> float | None:
+        """One summary of the believed position noise (rad): the median over the joints
+        above the floor (the measured ones; held and exact joints believe the floor), or
+        the floor. Each joint's own: noise_per_joint()."""
+        return _summary(self._r, self._floor)
+
+    def velocity_noise(self) -> float | None:
+        return _summary(self._rv, self._floor)
+
+    def measured_noise(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint (position, velocity) noise variances as measured, BEFORE the floor (the
+        floor keeps the gain sane on exact input; it is a belief, not noise that is there);
+        the fixed values where set, the default belief before the first estimate."""
+        ne = self.noise_estimator
+        r2 = self._r**2
+        rv2 = self._rv**2
+        if self._fixed_r is None and ne.ready:
+            r2 = ne.position(np.zeros(self.n)) ** 2
+        if self._fixed_rv is None and ne.velocity_ready:
+            rv2 = ne.velocity(np.zeros(self.n)) ** 2
+        return r2, rv2
+
+    def noise_known(self, velocity_given: bool) -> bool:
+        """Whether the noise the filter runs with is measured (or fixed), not the default
+        belief it starts with: the estimate needs ~0.3-0.5 s of samples (noise.py) and is
+        applied at the next noise update (every NOISE_EVERY_S), longer than the state's
+        warm-up; until then the gain, hence the error, is that of a guess."""
+        known = self._fixed_r is not None or self._applied[0]
+        if velocity_given:
+            known = known and (self._fixed_rv is not None or self._applied[1])
+        return known
+
+    def noiseless(self) -> np.ndarray:
+        """(n,) bool: joints whose white level (third differences of consecutive samples,
+        near Nyquist, where no movement is) is within 2 x the floor: exact or held input,
+        the jump gate's rule for exact input; their 10 Hz level is the movement's own
+        content, not noise. None with the noise fixed (kalman_noise_deg > 0) or before the
+        first white-level estimate."""
+        if self._fixed_r is not None or not self.noise_estimator.white_evaluations:
+            return np.zeros(self.n, bool)
+        return self.noise_estimator.white(np.empty(self.n)) <= 2.0 * self._floor
+
+    def _update_noise(self, vel: bool, dt: float) -> None:
+        ne = self.noise_estimator
+        moved = False
+        if self._fixed_r is None and ne.ready:
+            ne.position(self._r)
+            np.maximum(self._r, self._floor, out=self._r)
+            np.copyto(self._r_gate, self._r)  # the gate judges with the noise as measured
+            capped = np.full(self.n, np.inf)
+            if not vel and self._wmin > 0.0 and ne.period_s > 0.0 and self.delay_s <= 0.0:
+                # never smooth below the practice's band: cap at the noise whose filter
+                # bandwidth (psd / (r^2 dt))^(1/6) is kalman_min_bandwidth_hz
+                cap = math.sqrt(self.psd / (self._wmin**6 * ne.period_s))
+                white = ne.white(self._tmp)
+                white *= COLOURED_RATIO  # band level above this: coloured, capped
+                capped[self._r > white] = cap
+                np.minimum(capped, self._r, out=self._r)
+                np.maximum(self._r, self._floor, out=self._r)
+            np.copyto(self._r_eff, self._r)
+            pg = self._pgain
+            if pg is not None and pg.ready and not vel:
+                # the movement's own band, measured: the gain depends on psd / r^2 only, so
+                # a joint whose practice-band jerk has the spectral density s_j is filtered
+                # as the library's psd would filter r sqrt(psd / s_j) (a slow reach: s_j ~100 x
+                # below the library's 3e3); the belief r itself stays the noise as measured
+                r_eff = self._r_gate * np.sqrt(self.psd / np.maximum(pg.jerk_psd(), 1e-6 * self.psd))
+                np.minimum(r_eff, R_EFF_MAX * self._r_gate, out=r_eff)
+                np.minimum(capped, r_eff, out=self._r_eff)
+                np.maximum(self._r_eff, self._floor, out=self._r_eff)
+            # the innovations' prior variance: the groups' (at psd, r_eff) scaled to the joint's
+            # belief r (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2);
+            # r, not the gate's uncapped noise: without the practice gain r_eff = r, scale 1,
+            # and the gate and covariance() are main's (the 7 Hz cap's belief, as before)
+            np.divide(self._r, self._r_eff, out=self._rscale2)
+            self._rscale2 *= self._rscale2
+            self._innovation_std()  # not the groups' recursions: they are converged (still)
+            self._armed = moved = True
+            self._applied[0] = True
+        elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
+            # no 10 Hz estimate yet (a stream whose timer stalls restarts it at every stall and
+            # may never get one): the gate judges with the white level, measured in a few
+            # samples, rather than stay unarmed and let every jump ring through the filter
+            ne.white(self._r_gate)
+            np.maximum(self._r_gate, self._floor, out=self._r_gate)
+            for g in self._groups:
+                g.still = False  # the innovation stds again at the next step
+            self._armed = True
+        if vel and self._fixed_rv is None and ne.velocity_ready:
+            ne.velocity(self._rv)
+            np.maximum(self._rv, self._floor, out=self._rv)
+            moved = True
+            self._applied[1] = True
+        if moved:
+            self._regroup(vel, dt)
+        pg = self._pgain
+        if pg is not None and not vel and ne.period_s > 0.0:
+            pg.configure(ne.period_s)  # kernels once per rate
+            np.copyto(self._gain, pg.update_gain())
+            self._pg_residual = pg.residual(pg.gain)
+            if ne.white_evaluations:  # exact or held joints (no white level at all, even with
+                # a fixed noise belief): their q̈ is the input's own, gain 1. Not the gate's
+                # 2 x floor: a real marker elbow reads 0.017 deg there (UE-ADL) and is exactly
+                # the joint whose coloured content above 6 Hz must be calibrated away
+                exact = ne.white(self._tmp) <= EXACT_WHITE * self._floor
+                self._gain[:, exact] = 1.0
+                self._pg_residual[:, exact] = 0.0

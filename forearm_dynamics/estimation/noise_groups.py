@@ -1,0 +1,173 @@
+"""The Kalman filter's noise groups: joints that share a noise level share one covariance.
+
+Why apart from the filter (kalman.py): the grouping is the filter's cost model, not its
+estimate. Joints are binned by noise (bins a factor sqrt(2) apart, with hysteresis), each
+group carries one covariance recursion in plain floats (ca_model), converged groups skip
+it at a repeating dt, and a new group is seated near its steady state (scaled from the
+group its first joint was in, else one cached Riccati solve). `NoiseGroups` is a mixin of
+KalmanCA: it reads the filter's noise beliefs (_r_eff, _rv, _r_gate, _rscale2, _floor,
+_fixed_r, _fixed_rv) and writes the per-joint gains (_Kp, _Kv) and innovation stds (_sig).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import ca_model
+
+BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
+HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
+
+
+#: how each posterior element (p00, p01, p02, p11, p12, p22) of a positions-only filter scales
+#: with its noise r at a fixed psd: the continuous-time limit P_ij ~ R w^(i + j + 1), R = r^2 dt,
+#: bandwidth w = (psd / R)^(1/6), so P_ij ~ r^(2 - (i + j + 1) / 3)
+_SEAT_POWERS = (5 / 3, 4 / 3, 1.0, 1.0, 2 / 3, 1 / 3)
+
+
+def _rescaled(p: tuple, s: float, vel: bool) -> tuple:
+    """A converged posterior p at noise r, moved to the noise s r: near the steady state there
+    (positions only: each element by its own power of s, _SEAT_POWERS). Scaled by s^2 for all
+    elements (the old seat) it was 11 % off in the q̈ lag at 1 kHz and, since issue 29's
+    measured jerk level narrows a still joint's filter (r_eff up to 4 r), took ~150 samples
+    to settle; with velocities the gain depends on two noises: s^2 (a step of one bin)."""
+    if vel:
+        return tuple(x * s * s for x in p)
+    return tuple(x * s**e for x, e in zip(p, _SEAT_POWERS))
+
+
+@dataclass(frozen=True)
+class NoiseGroup:
+    """Joints `idx` filtered with one noise level (r, r_v; r_v None without velocities):
+    the gain (3, m) and prior covariance M (3, 3) of the last step, at period dt."""
+
+    idx: np.ndarray
+    r: float
+    r_v: float | None
+    gain: np.ndarray
+    prior: np.ndarray
+    dt: float
+
+
+class _Group:
+    """Joints that share a noise level: one covariance recursion."""
+
+    __slots__ = ("M", "P", "dt", "idx", "k", "key", "r", "rv", "still")
+
+    def __init__(self, key: tuple[int, int], r: float, rv: float, idx: np.ndarray):
+        self.key, self.r, self.rv, self.idx = key, r, rv, idx
+        self.P: tuple | None = None
+        self.M: tuple = (0.0,) * 6
+        self.k: tuple = ()
+        self.dt = -1.0
+        self.still = False
+
+
+
+class NoiseGroups:
+    """Mixin of KalmanCA: the groups, their recursions, the per-joint gains; see above."""
+
+    @property
+    def groups_version(self) -> int:
+        """Changes whenever the noise groups (levels, members, velocity mode) change."""
+        return self._groups_version
+
+    def noise_groups(self) -> list[NoiseGroup]:
+        """The groups of joints sharing a noise level and a gain, as the last step used them
+        (for torque uncertainty: issue 19's state_source reads these, nothing private)."""
+        out = []
+        for g in self._groups:
+            if g.P is None or not g.k:
+                continue
+            m = len(g.k) // 3
+            out.append(NoiseGroup(g.idx.copy(), g.r, g.rv if m == 2 else None,
+                                  np.array(g.k).reshape(3, m), ca_model.to_matrix(g.M), g.dt))
+        return out
+
+    def _regroup(self, vel: bool, dt: float) -> None:
+        """Bin each joint's noise (hysteresis) and rebuild the groups if the bins changed."""
+        changed = vel != self._vel
+        for row, r in ((0, self._r_eff), (1, self._rv)):
+            if row == 1 and not vel:
+                if (self._bins[1] != 0).any():
+                    self._bins[1].fill(0)
+                    changed = True
+                continue
+            pos = np.log(np.maximum(r, 1e-300) / self._floor) / BIN
+            cur = self._bins[row]
+            move = np.abs(pos - cur) > 0.5 + (HYSTERESIS - 0.5) * (cur > -10**5)
+            if move.any():
+                cur[move] = np.rint(pos[move]).astype(int)
+                changed = True
+        if not changed and self._groups:
+            return
+        old = {g.key: g for g in self._groups}
+        keys: dict[tuple[int, int], list[int]] = {}
+        for j in range(self.n):
+            keys.setdefault((int(self._bins[0, j]), int(self._bins[1, j])), []).append(j)
+        groups = []
+        for i, (key, idx) in enumerate(sorted(keys.items())):
+            r = self._floor * math.exp(key[0] * BIN) if self._fixed_r is None else self._fixed_r
+            rv = (self._floor * math.exp(key[1] * BIN) if self._fixed_rv is None else self._fixed_rv)
+            g = old.get(key) if vel == self._vel else None
+            if g is None:
+                g = _Group(key, r, rv, np.array(idx, np.intp))
+            else:
+                g.idx = np.array(idx, np.intp)
+            self._gidx[g.idx] = i
+            groups.append(g)
+        self._groups = groups
+        self._groups_version += 1
+        self._vel = vel
+        self._Kg = np.zeros((6, len(groups)))
+        self._Sg = np.zeros(len(groups))
+        for g in groups:
+            g.still = False
+            if g.P is None:  # seat it: scaled from the group its first joint was in, else solved
+                prev = next((o for o in old.values() if g.idx[0] in o.idx and o.P is not None), None)
+                if prev is not None and vel == self._vel_seat:
+                    g.P = _rescaled(prev.P, g.r / prev.r, vel)
+                else:
+                    g.P = ca_model.steady_posterior(dt, g.r, g.rv if vel else None, self.psd)
+        self._vel_seat = vel
+        if self._smoother is not None:
+            self._smooth_dt = 0.0  # new gains at the next step
+
+    def _covariance_step(self, dt: float, vel: bool) -> None:
+        """Each group's recursion at dt; the per-joint gains and innovation stds."""
+        changed = False
+        kg, sg = self._Kg, self._Sg
+        for i, g in enumerate(self._groups):
+            if g.still and dt == g.dt:
+                continue
+            m = ca_model.prior(g.P, dt, self.psd)
+            r2 = g.r * g.r
+            k, p = ca_model.measurement_update(m, r2, g.rv * g.rv if vel else None)
+            old = g.P
+            g.still = dt == g.dt and all(abs(a - b) <= 1e-12 * abs(a) + 1e-300 for a, b in zip(p, old))
+            g.P, g.M, g.k, g.dt = p, m, k, dt
+            if vel:
+                kg[0, i], kg[3, i], kg[1, i], kg[4, i], kg[2, i], kg[5, i] = k
+            else:
+                kg[0, i], kg[1, i], kg[2, i] = k
+            sg[i] = m[0]
+            changed = True
+        if changed:
+            gi = self._gidx
+            np.take(kg[:3], gi, axis=1, out=self._Kp)
+            if vel:
+                np.take(kg[3:], gi, axis=1, out=self._Kv)
+            self._innovation_std()
+
+    def _innovation_std(self) -> None:
+        """Per joint innovation std with the noise as measured: the group's prior variance
+        scaled to the joint's own ((r / r_eff)^2) plus r^2."""
+        sig = self._sig
+        np.take(self._Sg, self._gidx, out=sig)
+        sig *= self._rscale2
+        np.multiply(self._r_gate, self._r_gate, out=self._tmp)
+        sig += self._tmp
+        np.sqrt(sig, out=sig)
