@@ -53,10 +53,14 @@ GAP_S = 1.0
 DELAYS_S = (0.0, 0.01, 0.025, 0.05, 0.1, 0.14, 0.2)  # 0.14: OpenSimRT's 14 samples at 100 Hz
 
 
+#: estimators added by --add (label, name, settings), scored after the standard ones
+EXTRA: list[tuple[str, str, dict]] = []
+
+
 def candidates() -> list[tuple[str, str, dict]]:
     return [("kalman", "kalman", {}), ("kalman_delay_50ms", "kalman", {"delay_s": 0.05}),
             ("baseline", "butterworth", {"butterworth_cutoff_hz": 6.0}),
-            ("opensimrt_style", "opensimrt_style", {}), ("backward", "backward", {})]
+            ("opensimrt_style", "opensimrt_style", {}), ("backward", "backward", {}), *EXTRA]
 
 
 def build(name: str, settings: dict, n: int):
@@ -258,6 +262,9 @@ def main(argv=None) -> int:
     ap.add_argument("--recordings", type=Path, default=None,
                     help="directory with more OpenSim IK results (see benchmarks/data/README.md)")
     ap.add_argument("--only", default="", help="comma-separated sensor names (default: all)")
+    ap.add_argument("--add", default="", help="comma-separated estimator names scored beside the "
+                    "standard ones at their defaults (e.g. selector; use with --out elsewhere: the "
+                    "docs tables are the standard ones)")
     ap.add_argument("--table", action="store_true",
                     help="print the docs/estimation.md tables from --out (no benchmark run)")
     args = ap.parse_args(argv)
@@ -270,6 +277,7 @@ def main(argv=None) -> int:
     ptp = library_ptp(arm)
     movements = movement_library()[:: args.every]
     only = {s for s in args.only.split(",") if s}
+    EXTRA[:] = [(x, x, {}) for x in args.add.split(",") if x]
     secs = [sensor_section(arm, s, movements, ptp, SEED + i) for i, s in enumerate(sensors.zoo())
             if not only or s.name in only]
     curve = delay_curve(arm, movements, ptp, SEED + 100)

@@ -1,14 +1,15 @@
-"""The Kalman estimator's update() cost, alone (no node, no DDS): p50 / p99 / max per call.
+"""The estimators' update() cost, alone (no node, no DDS): p50 / p99 / max per call.
 
     .venv/bin/python benchmarks/estimator_cost.py [--seconds 200] [--joints 20]
 
 Streams: 1 kHz with velocities (what the node benchmark streams) and 100 Hz positions only
 (a mocap file), a 0.7 Hz movement on every joint through 0.3 deg (1 deg/s) white noise, the
-first tenth discarded; the default settings, and positions only with issue 29's opt-in
-practice gain. The p99 of a positions-only stream is its noise updates (every 0.25 s: 4 %
-of the samples at 100 Hz): the regroups, and any Riccati solve that seats a group there
-(ca_model.steady_posterior, cached since issue 29 item 5). Timing: noisy on a shared
-machine; state `uptime` with the numbers.
+first tenth discarded; the default settings, with delay_s 0.05, positions only with issue 29's opt-in
+practice gain, the opt-in `selector` (estimation/selector.py: three estimators per sample)
+and the causal Butterworth for scale. The p99 of a positions-only stream is its noise
+updates (every 0.25 s: 4 % of the samples at 100 Hz): the regroups, and any Riccati solve
+that seats a group there (ca_model.steady_posterior, cached since issue 29 item 5). Timing:
+noisy on a shared machine; state `uptime` with the numbers.
 """
 
 from __future__ import annotations
@@ -26,7 +27,11 @@ CASES = (("1 kHz, velocities, default", 1000.0, True, {}),
          ("100 Hz, positions, practice gain (opt-in)", 100.0, False,
           {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}),
          ("1 kHz, velocities, delay 0.05 s", 1000.0, True, {"delay_s": 0.05}),
-         ("100 Hz, positions, delay 0.05 s", 100.0, False, {"delay_s": 0.05}))
+         ("100 Hz, positions, delay 0.05 s", 100.0, False, {"delay_s": 0.05}),
+         ("1 kHz, positions, default", 1000.0, False, {}),
+         ("100 Hz, positions, selector (opt-in)", 100.0, False, {"estimator": "selector"}),
+         ("1 kHz, positions, selector (opt-in)", 1000.0, False, {"estimator": "selector"}),
+         ("100 Hz, positions, butterworth", 100.0, False, {"estimator": "butterworth"}))
 
 
 def run(rate: float, vel: bool, settings: dict, seconds: float, n: int) -> np.ndarray:
@@ -37,7 +42,8 @@ def run(rate: float, vel: bool, settings: dict, seconds: float, n: int) -> np.nd
     phase = 2 * np.pi * 0.7 * t[:, None] + np.arange(n)
     q = 0.5 * np.sin(phase) + math.radians(0.3) * rng.standard_normal((m, n))
     qd = 0.5 * 2 * np.pi * 0.7 * np.cos(phase) + math.radians(1.0) * rng.standard_normal((m, n))
-    est = make_estimator("kalman", n, settings)
+    settings = dict(settings)
+    est = make_estimator(settings.pop("estimator", "kalman"), n, settings)
     stamps = np.round(t * 1e9).astype(np.int64) + 10**9
     out = np.empty(m)
     for k in range(m):

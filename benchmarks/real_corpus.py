@@ -21,8 +21,8 @@ for running); and the ratio to the causal 6 Hz Butterworth (the node's `butterwo
 estimator, cutoff 6 Hz) on the same window. Estimators: `kalman` (the node's default,
 causal), `kalman` with delay_s 0.05, 0.1, 0.2, `butterworth` 6 Hz, and `kalman_practice_gain`
 (issue 29's opt-in practice gain, causal: practice_band_hz 6, kalman_min_bandwidth_hz 0;
-not in the targets, which are the default's). Medians and worst
-cases per half over every (recording, DOF) series. `bag_torques_max_dev_nm`: the largest
+not in the targets, which are the default's) and `selector` (opt-in, estimation/selector.py).
+Medians and worst cases per half over every (recording, DOF) series. `bag_torques_max_dev_nm`: the largest
 difference between `bag_torques`' offline computation (offline/torques.compute) and the
 node's outputs at equal stamps (0 when bag_torques stamps delayed estimates as the node),
 on the first `--bag-check` recordings of each half.
@@ -67,8 +67,11 @@ ESTIMATORS = {
     "butterworth": ("butterworth", {"butterworth_cutoff_hz": 6.0}),
     # issue 29's opt-in practice gain, causal (kalman.py: practice_band_hz, the measured setting)
     "kalman_practice_gain": ("kalman", {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}),
+    # opt-in: per joint kalman or 0.75 practice gain + 0.25 Butterworth, judged online (selector.py)
+    "selector": ("selector", {}),
 }
 BASELINE = "butterworth"
+BAG_CHECK = 4  # recordings per half whose bag_torques computation is compared with the node's
 MOBL = {"elbow_flexion": "elbow_flexion", "pro_sup": "pro_sup", "wrist_flexion": "flexion",
         "wrist_deviation": "deviation"}
 
@@ -175,6 +178,11 @@ def _stats(xs) -> dict:
     return {"median": float(np.median(xs)), "worst": float(np.max(xs)), "n": len(xs)}
 
 
+def _labels(rs: list[dict]) -> list[str]:
+    """The estimators every recording was scored with (an older output lacks a newer label)."""
+    return [label for label in ESTIMATORS if all(label in r["estimators"] for r in rs)]
+
+
 def summary(recs: list[dict]) -> dict:
     """Per half: per estimator, over every (recording, DOF) series: median and worst of the
     ratio to the Butterworth and of the NRMSE, settled and in the first second; the series
@@ -187,7 +195,7 @@ def summary(recs: list[dict]) -> dict:
         h = {"recordings": len(rs), "series": sum(len(r["joints"]) for r in rs),
              "sources": sorted({r["source"] for r in rs}), "subjects": len({r["subject"] for r in rs}),
              "all_raw": all(r["raw"] for r in rs), "estimators": {}}
-        for label in ESTIMATORS:
+        for label in _labels(rs):
             e = {}
             for win in ("settled", "first_second"):
                 ratios = [r["estimators"][label][f"ratio_{win}"][j] for r in rs for j in r["joints"]]
@@ -226,7 +234,7 @@ def summary(recs: list[dict]) -> dict:
             h["per_source"][src] = {
                 label: {win: _stats([r["estimators"][label][f"ratio_{win}"][j]
                                      for r in sr for j in r["joints"]])
-                        for win in ("settled", "first_second")} for label in ESTIMATORS}
+                        for win in ("settled", "first_second")} for label in _labels(rs)}
         h["targets"] = targets(rs, h)
         out[half] = h
     return out
@@ -270,7 +278,8 @@ def run(args) -> dict:
         recs = [_job(j) for j in jobs]
     cmd = "python benchmarks/real_corpus.py" + (" --opensim-models DIR" if args.opensim_models else "")
     return {"command": cmd
-            + (f" --jobs {args.jobs}" if args.jobs > 1 else ""),
+            + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
+            + (f" --bag-check {args.bag_check}" if args.bag_check != BAG_CHECK else ""),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": f"{os.cpu_count()} cores",
             "loadavg_start": load0, "loadavg_end": list(os.getloadavg()),
             "wall_time_s": time.perf_counter() - t0, "settle_s": realscore.SETTLE_S,
@@ -333,7 +342,7 @@ def docs_table(res: dict) -> str:
         h = res["summary"].get(half)
         if h is None:
             continue
-        for label in ESTIMATORS:
+        for label in (x for x in ESTIMATORS if x in h["estimators"]):
             e = h["estimators"][label]
             s, f = e["settled"], e["first_second"]
             nr = s["nrmse"]
@@ -461,9 +470,9 @@ def main(argv=None) -> int:
                     help="checkout or mirror of opensim-org/opensim-models (its running trials)")
     ap.add_argument("--halves", default="tuning,held_out", type=lambda s: s.split(","))
     ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--bag-check", type=int, default=4, metavar="N",
+    ap.add_argument("--bag-check", type=int, default=BAG_CHECK, metavar="N",
                     help="compare bag_torques' computation with the node's outputs on the first N "
-                         "recordings of each half (default 4)")
+                         f"recordings of each half (default {BAG_CHECK})")
     ap.add_argument("--limit", type=int, default=0, help="first N recordings only (a quick look)")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--figure", type=Path, default=HERE / "real_corpus.png")
