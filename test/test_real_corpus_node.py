@@ -51,6 +51,11 @@ PRACTICE_GAIN = ("-p", "estimator.practice_band_hz:=6.0", "-p", "estimator.kalma
 
 
 @pytest.fixture(scope="module")
+def replay_selector():
+    return _replay("-p", "estimator:=selector")
+
+
+@pytest.fixture(scope="module")
 def replay():
     return _replay()  # no parameter: the defaults a user gets
 
@@ -114,6 +119,14 @@ def test_raw_recording_through_torque_node_with_the_practice_gain(replay_practic
     _no_worse_than_butterworth(replay_practice_gain, "practice_band_hz 6")
 
 
+def test_raw_recording_through_torque_node_with_the_selector(replay_selector) -> None:
+    """The same with the opt-in selector (estimation/selector.py; benchmarks/real_corpus.json:
+    elbow 0.936, pro/sup 0.625, wrist flexion 0.740, deviation 0.856 x the Butterworth), and
+    the node's torques are the benchmark's offline replay of the selector at equal stamps."""
+    _no_worse_than_butterworth(replay_selector, "estimator selector")
+    _equals_offline(replay_selector, "selector")
+
+
 def _no_worse_than_butterworth(replay, what: str) -> None:
     rec, stamps, out_st, effort = replay
     arm = build_model("segmented", 50, side=rec.side)
@@ -134,11 +147,15 @@ def _no_worse_than_butterworth(replay, what: str) -> None:
 
 
 def test_node_torques_are_the_offline_replays(replay) -> None:
-    rec, stamps, out_st, effort = replay
-    arm = build_model("segmented", 50, side=rec.side)
     from forearm_dynamics.estimation import DEFAULT_ESTIMATOR
 
-    off = realscore.node_outputs(stamps, rec.q, DEFAULT_ESTIMATOR)
+    _equals_offline(replay, DEFAULT_ESTIMATOR)
+
+
+def _equals_offline(replay, estimator: str) -> None:
+    rec, stamps, out_st, effort = replay
+    arm = build_model("segmented", 50, side=rec.side)
+    off = realscore.node_outputs(stamps, rec.q, estimator)
     tau = arm.inverse_dynamics_batch(off.q, off.qd, off.qdd)
     both = np.intersect1d(out_st, off.stamps_ns)
     assert len(both) >= len(stamps) - 5
