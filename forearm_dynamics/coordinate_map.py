@@ -19,7 +19,6 @@ from .description import JOINT_NAMES
 from .errors import MotionError
 from .paths import config_file
 
-
 SIDES = ("right", "left")
 
 
