@@ -54,12 +54,13 @@ import numpy as np
 from ..coordinate_map import CoordinateMap
 from ..description import JOINT_NAMES
 from ..errors import ForearmDynamicsError, MotionError, UsageError, exit_code_of
-from .fit import FitSizes, build, joint_box
+from .fit import SIGN_CHECKS, FitSizes, build, joint_box
 from .model import MuscleModelError
 
 DEFAULT_VMAX = 10.0  # optimal fibre lengths per second: OpenSim DeGrooteFregly2016Muscle's
 SPAN_MIN_M = 1e-6  # a moment arm this large at some posture: the muscle crosses the joint
 SPAN_POSTURES = 12
+REPAIR_DEG = 0.5  # a NaN path is taken this far away (normal σ per mapped joint)
 #: (OpenSim property, our parameter, rule): "pos" > 0, "nonneg" >= 0, "angle" in [0, 90°)
 PROPERTIES = (
     ("max_isometric_force", "max_isometric_force", "pos"),
@@ -102,13 +103,14 @@ class OsimSource:
     interface: names, evaluate, parameters, version)."""
 
     def __init__(self, path: str | Path, side: str = "right", cmap: CoordinateMap | None = None,
-                 progress=print):
+                 progress=print, exclude: tuple[str, ...] = ()):
         osim = _opensim()
         self.path = Path(path)
         if not self.path.is_file():
             raise UsageError(f"{self.path}: no such OpenSim model file")
         self.progress = progress
         self.n_evaluated = 0  # postures asked of OpenSim (the report's cost figure)
+        self.repaired: dict[str, list] = {}  # muscle -> postures (deg, mapped) repaired
         cmap = cmap if cmap is not None else CoordinateMap.load()
         try:
             model = osim.Model(str(self.path))
@@ -166,7 +168,13 @@ class OsimSource:
         self._sign = np.array([m.sign for m in self.mapped])
         self._offset = np.array([m.offset for m in self.mapped])
         ms = model.getMuscles()
-        muscles = [ms.get(i) for i in range(ms.getSize())]
+        every = [ms.get(i).getName() for i in range(ms.getSize())]
+        unknown = [n for n in exclude if n not in every]
+        if unknown:
+            raise UsageError(f"{self.path}: --exclude names no muscle of the model: "
+                             f"{', '.join(unknown)} (its muscles: {', '.join(every[:8])} ...)")
+        self.excluded = list(exclude)
+        muscles = [ms.get(i) for i in range(ms.getSize()) if ms.get(i).getName() not in exclude]
         self.vmax_replaced: list[str] = []
         self._params = {}
         for mus in muscles:  # refuse a bad file before minutes of sampling
@@ -238,12 +246,9 @@ class OsimSource:
         t0 = last = time.perf_counter()
         for k, qk in enumerate(q):
             self._set(qk)
-            s = self.state
-            for i, m in enumerate(rows):
-                mus = self._muscles[m]
-                L[k, i] = mus.getLength(s)
-                for p in self._pairs[m]:
-                    R[k, i, self._col[p]] = self._sign[p] * mus.computeMomentArm(s, self._coord[p])
+            failed = [i for i, m in enumerate(rows) if not self._one(m, L[k], R[k], i)]
+            for i in failed:  # OpenSim's wrapping gave NaN here (MoBL's FCU): a posture 0.5° off
+                self._repair(rows[i], qk, L[k], R[k], i)
             now = time.perf_counter()
             if self.progress and now - last > 10.0:
                 last = now
@@ -251,6 +256,34 @@ class OsimSource:
                               "each)", flush=True)
         self.n_evaluated += len(q)
         return L, R
+
+    def _one(self, m: int, L: np.ndarray, R: np.ndarray, i: int) -> bool:
+        """Muscle m's length and moment arms at the state's posture into L[i], R[i]; False
+        when OpenSim gives a value that is not finite."""
+        mus, s = self._muscles[m], self.state
+        L[i] = mus.getLength(s)
+        for p in self._pairs[m]:
+            R[i, self._col[p]] = self._sign[p] * mus.computeMomentArm(s, self._coord[p])
+        return bool(np.isfinite(L[i]) and np.isfinite(R[i]).all())
+
+    def _repair(self, m: int, qk: np.ndarray, L: np.ndarray, R: np.ndarray, i: int) -> None:
+        """A path OpenSim cannot compute at qk (NaN: a wrapping surface's singular case) takes
+        its values at the first of up to 5 postures ~REPAIR_DEG off where it is finite,
+        counted in `repaired` (the file's source.nan_repaired)."""
+        name = self._muscles[m].getName()
+        rng = np.random.default_rng(len(self.repaired.get(name, ())))
+        for _ in range(5):
+            qj = qk.copy()
+            qj[self._col] += rng.normal(0.0, math.radians(REPAIR_DEG), len(self._col))
+            self._set(qj)
+            if self._one(m, L, R, i):
+                self.repaired.setdefault(name, []).append([round(math.degrees(v), 2)
+                                                           for v in qk[self._col]])
+                self._set(qk)
+                return
+        raise MuscleModelError(f"{self.path}: muscle {name!r}: OpenSim gives no finite length "
+                               f"or moment arm near {np.degrees(qk[self._col]).round(1).tolist()} "
+                               f"deg ({', '.join(mp.joint for mp in self.mapped)})")
 
     def evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q (N, 20) ours -> lengths (N, n) m, moment arms (N, n, 20) m (our signs)."""
@@ -277,6 +310,10 @@ class OsimSource:
             "held_unit": "deg (rotational) or m (translational), as the coordinate",
             "dependent": self.dependent,
             "dropped_muscles": self.dropped,
+            "excluded_muscles": self.excluded,
+            "nan_repaired": {n: len(v) for n, v in self.repaired.items()},
+            "nan_repair_rule": (f"a posture where OpenSim gives a NaN length or moment arm "
+                                f"takes the values at a posture ~{REPAIR_DEG}° off"),
             "moment_arms": ("OpenSim Muscle.computeMomentArm(state, coordinate) × sign "
                             "(constraint-consistent; not -dL/dq)"),
             "parameter_rule": ("max isometric force, optimal fibre length, tendon slack "
@@ -288,16 +325,35 @@ class OsimSource:
         }
 
 
+def action_checks(src: OsimSource) -> tuple[list[str], list[str]]:
+    """fit.SIGN_CHECKS (anatomical actions: PT pronates, ECU deviates ulnarly ...) for the
+    muscles of the model that carry those names (MoBL-ARMS: 10), at the middle of our
+    ranges: (as expected, not as expected) as 'muscle joint +x.xx mm' lines. A check of
+    the mapping's signs, reported, not enforced: a user's model may name muscles otherwise."""
+    lo, hi = joint_box()
+    _, R = src.evaluate(0.5 * (lo + hi)[None])
+    good, bad = [], []
+    for muscle, joint, sgn in SIGN_CHECKS:
+        if muscle in src.names:
+            r = R[0, src.names.index(muscle), JOINT_NAMES.index(joint)]
+            (good if np.sign(r) == sgn else bad).append(f"{muscle} {joint} {r * 1e3:+.2f} mm")
+    return good, bad
+
+
 def build_osim(model: str | Path, out: str | Path, *, side: str = "right",
-               cmap: CoordinateMap | None = None, seed: int = 0,
-               sizes: FitSizes = OSIM_SIZES, progress=print) -> tuple[dict, OsimSource]:
+               cmap: CoordinateMap | None = None, seed: int = 0, sizes: FitSizes = OSIM_SIZES,
+               progress=print, exclude: tuple[str, ...] = ()) -> tuple[dict, OsimSource]:
     """Fit the surrogates of `model`'s muscles; write the muscle model file `out`."""
-    src = OsimSource(model, side, cmap, progress)
+    src = OsimSource(model, side, cmap, progress, exclude)
     if progress:
         progress(f"{src.path}: {len(src.names)} muscles at our joints "
                  f"({sum(map(len, src._pairs))} pairs), dropped (cross none of ours): "
                  f"{', '.join(src.dropped) or 'none'}", flush=True)
         progress(src.unmapped_line, flush=True)
+        good, bad = action_checks(src)
+        progress(f"anatomical actions (mid-range): {len(good)} as expected ({', '.join(good)})"
+                 + (f"; NOT as expected, check the map's signs: {', '.join(bad)}" if bad else ""),
+                 flush=True)
     doc = build(Path(out), seed, None, src=src, source=src.source(), sizes=sizes)
     return doc, src
 
@@ -311,6 +367,9 @@ def main(argv=None) -> int:
                     help="a coordinate map of your own (config/opensim_coordinates.yaml's format)")
     ap.add_argument("--side", choices=("right", "left"), default="right")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--exclude", default="", metavar="M1,M2",
+                    help="muscles to leave out (e.g. ones whose path wrapping fails: the report "
+                         "lists pairs above 1 mm)")
     ap.add_argument("--samples", type=int, default=OSIM_SIZES.n_fit,
                     help="uniform fitting postures (held-out: a quarter as many)")
     args = ap.parse_args(argv)
@@ -321,7 +380,8 @@ def main(argv=None) -> int:
     try:
         cmap = CoordinateMap.load(args.map) if args.map is not None else None
         doc, src = build_osim(args.model, args.output, side=args.side, cmap=cmap,
-                              seed=args.seed, sizes=sizes)
+                              seed=args.seed, sizes=sizes,
+                              exclude=tuple(n for n in args.exclude.split(",") if n))
     except ForearmDynamicsError as exc:
         print(f"source_osim: {exc}", file=sys.stderr)
         return exit_code_of(exc)
@@ -333,6 +393,9 @@ def main(argv=None) -> int:
           f"{doc['fit']['held_out']} held-out postures; worst (RMS / max mm):")
     for r, mx, n, j in pairs[:10]:
         print(f"  {n} {j}: {r:.3f} / {mx:.2f}")
+    if src.repaired:
+        print("NaN paths repaired (postures): " + ", ".join(f"{n} {len(v)}" for n, v in
+                                                           src.repaired.items()))
     return 0
 
 
