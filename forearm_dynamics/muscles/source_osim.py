@@ -334,7 +334,7 @@ def action_checks(src: OsimSource) -> tuple[list[str], list[str]]:
     _, R = src.evaluate(0.5 * (lo + hi)[None])
     good, bad = [], []
     for muscle, joint, sgn in SIGN_CHECKS:
-        if muscle in src.names:
+        if muscle in src.names and any(mp.joint == joint for mp in src.mapped):
             r = R[0, src.names.index(muscle), JOINT_NAMES.index(joint)]
             (good if np.sign(r) == sgn else bad).append(f"{muscle} {joint} {r * 1e3:+.2f} mm")
     return good, bad
