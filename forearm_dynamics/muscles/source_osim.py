@@ -35,7 +35,7 @@ What it does (`OsimSource`, then fit.build with a smaller posture budget):
    it is 0 or absent (MoBL-ARMS: 0 in 48 muscles); the muscles replaced are listed.
 5. fit.build fits the same polynomials with the same sign rules, jump detection and
    held-out errors as the shipped file (FitSizes: fewer postures, since computeMomentArm
-   costs ~0.8 ms a pair: MoBL-ARMS' 97 pairs ~70-130 ms a posture on 2 cores).
+   costs ~1 ms a pair: MoBL-ARMS' 98 pairs 70-140 ms a posture on 2 cores at load 3-8).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ PROPERTIES = (
     ("tendon_slack_length", "tendon_slack_length", "nonneg"),
     ("pennation_angle_at_optimal", "pennation_at_optimal", "angle"),
 )
-OSIM_SIZES = FitSizes(n_fit=1500, n_test=400, n_edge_base=15, jump_bases=1, n_envelope=300)
+OSIM_SIZES = FitSizes(n_fit=1500, n_test=375, n_edge_base=15, jump_bases=1, n_envelope=300)
 
 
 def _opensim() -> Any:
