@@ -23,7 +23,7 @@ import pytest
 from forearm_dynamics import build_model
 from forearm_dynamics.coordinate_map import CoordinateMap
 from forearm_dynamics.description import JOINT_NAMES
-from forearm_dynamics.errors import MotionError
+from forearm_dynamics.errors import MotionError, UsageError
 from forearm_dynamics.muscles import MuscleModelError, load_muscle_model
 from forearm_dynamics.muscles.fit import FitSizes, joint_box
 
@@ -226,3 +226,28 @@ def test_without_opensim_one_line_and_exit_2(tmp_path, capsys, monkeypatch):
     code = source_osim.main([str(tmp_path / "x.osim"), "-o", str(tmp_path / "o.json")])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err and "pip install -e '.[reference]'" in err, err
+
+
+def test_exclude_and_anatomical_action_report(tmp_path):
+    """--exclude leaves a muscle out (listed); a muscle named as one of fit.SIGN_CHECKS (PT
+    pronates) is checked through the map: right with the file's sign, reported wrong with
+    the opposite one (a map whose pro_sup sign is flipped)."""
+    pt = {"PT": MUSCLES["PRO"]}  # proximal ulna -> distal radius: OpenSim's sign decides
+    path = write_model(tmp_path, muscles={**pt, **MUSCLES})
+    src = source_osim.OsimSource(path, progress=None, exclude=("ELB",))
+    assert "ELB" not in src.names and src.source()["excluded_muscles"] == ["ELB"]
+    good, bad = source_osim.action_checks(src)
+    flipped = _write(tmp_path / "flip.yaml", USER_MAP.replace(
+        "pro_sup: {joint: pro_sup, sign: 1, offset_deg: -90}",
+        "pro_sup: {joint: pro_sup, sign: -1, offset_deg: 0}"))
+    good2, bad2 = source_osim.action_checks(
+        source_osim.OsimSource(path, cmap=CoordinateMap.load(flipped), progress=None))
+    assert len(good) + len(bad) == 1 and len(good2) + len(bad2) == 1
+    assert (len(good), len(good2)) in ((1, 0), (0, 1))  # the sign flips the verdict
+    with pytest.raises(UsageError, match="NOPE"):
+        source_osim.OsimSource(path, progress=None, exclude=("NOPE",))
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path

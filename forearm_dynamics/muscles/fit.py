@@ -114,9 +114,9 @@ DEFAULT_OUT = Path(__file__).resolve().parent.parent / "data" / "muscles_myoarm.
 
 @dataclass(frozen=True)
 class FitSizes:
-    """How many postures build() asks of the source. The defaults are MyoArm's (MuJoCo: ~20 µs
-    a posture); a slow source (OpenSim's computeMomentArm, 70-140 ms a posture for MoBL-ARMS'
-    98 pairs: source_osim.py) takes fewer. n_edge_base: base postures per face and corner
+    """How many postures build() asks of the source. The defaults are MyoArm's (MuJoCo's
+    tendon Jacobians, cheap); a slow source (OpenSim's computeMomentArm, 70-140 ms a posture
+    for MoBL-ARMS' 98 pairs: source_osim.py) takes fewer. n_edge_base: base postures per face and corner
     (None: fit_core's N_EDGE / N_CORNER)."""
 
     n_fit: int = N_FIT
