@@ -59,9 +59,16 @@ USER_MAP = """coordinates:
 """
 
 
-def write_model(folder: Path, edit=None, muscles: dict = MUSCLES) -> Path:
-    """Our skeleton with `muscles` as an .osim file; `edit(muscle)` may change one first."""
+def write_model(folder: Path, edit=None, muscles: dict = MUSCLES, ranges_deg: dict | None = None
+                ) -> Path:
+    """Our skeleton with `muscles` as an .osim file; `edit(muscle)` may change one first.
+    pro_sup's coordinate range is ±180° (the user's map shifts it by 90°), the others ours,
+    or `ranges_deg` {coordinate: (lo, hi)}."""
     model = build_osim_model(build_model("segmented", 50).tree)
+    for name, (lo, hi) in {"pro_sup": (-180.0, 180.0), **(ranges_deg or {})}.items():
+        c = model.getCoordinateSet().get(name)
+        c.setRangeMin(math.radians(lo))
+        c.setRangeMax(math.radians(hi))
     bodies = model.getBodySet()
     for name, (f0, l0, lts, alpha, vmax, points) in muscles.items():
         m = osim.DeGrooteFregly2016Muscle()
@@ -236,6 +243,7 @@ def test_exclude_and_anatomical_action_report(tmp_path):
     path = write_model(tmp_path, muscles={**pt, **MUSCLES})
     src = source_osim.OsimSource(path, progress=None, exclude=("ELB",))
     assert "ELB" not in src.names and src.source()["excluded_muscles"] == ["ELB"]
+    assert src.source()["fit_box_deg"]["wrist_flexion"] == [-70.0, 80.0]  # ours: not cut
     good, bad = source_osim.action_checks(src)
     flipped = _write(tmp_path / "flip.yaml", USER_MAP.replace(
         "pro_sup: {joint: pro_sup, sign: 1, offset_deg: -90}",
@@ -251,3 +259,16 @@ def test_exclude_and_anatomical_action_report(tmp_path):
 def _write(path: Path, text: str) -> Path:
     path.write_text(text, encoding="utf-8")
     return path
+
+
+def test_fit_box_is_cut_to_the_models_own_ranges(tmp_path):
+    """Past its coordinates' ranges a model's geometry is untested: the fit stays inside
+    (mapped through the sign: wrist_deviation -1 turns theirs [-10, 25] into ours [-25, 10])."""
+    path = write_model(tmp_path, ranges_deg={"wrist_flexion": (-60.0, 60.0),
+                                             "wrist_deviation": (-10.0, 25.0)})
+    src = source_osim.OsimSource(path, cmap=CoordinateMap.load(
+        _write(tmp_path / "m.yaml", USER_MAP)), progress=None)
+    box = src.source()["fit_box_deg"]
+    assert box["wrist_flexion"] == [-60.0, 60.0]
+    assert box["wrist_deviation"] == [-20.0, 10.0]  # ours -20..30 cut by -25..10
+    assert box["elbow_flexion"] == [0.0, 130.0] and box["pro_sup"] == [-80.0, 80.0]

@@ -303,14 +303,16 @@ def write_heldout(src: MyoArm, path: Path, rng, n: int = 120, n_edge: int = 6) -
 
 def build(out: Path, seed: int = 0, heldout: Path | None = None,
           xml: Path | None = None, *, src=None, source: dict | None = None,
-          sizes: FitSizes = FitSizes()) -> dict:
+          sizes: FitSizes = FitSizes(), box: tuple | None = None) -> dict:
     """MyoArm (or the MuJoCo model `xml`), or any `src` with MyoArm's interface (names,
-    evaluate, parameters: source_osim.OsimSource) described by `source` (provenance)."""
+    evaluate, parameters: source_osim.OsimSource) described by `source` (provenance).
+    box: (lo, hi) rad of the fit (default our joints' ranges; the surrogate holds its edge
+    value outside it)."""
     t0 = time.perf_counter()
     own = src is None
     src = MyoArm(xml) if own else src
     rng = np.random.default_rng(seed)
-    lo, hi = joint_box()
+    lo, hi = joint_box() if box is None else box
     bad = check_signs(src, lo, hi) if own else []
     if bad:
         raise SystemExit("joint mapping gives the wrong action: " + "; ".join(bad))

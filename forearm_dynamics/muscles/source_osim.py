@@ -110,6 +110,7 @@ class OsimSource:
             raise UsageError(f"{self.path}: no such OpenSim model file")
         self.progress = progress
         self.n_evaluated = 0  # postures asked of OpenSim (the report's cost figure)
+        self.box_rule = "our joints' ranges cut to the model's coordinate ranges (mapped)"
         self.repaired: dict[str, list] = {}  # muscle -> postures (deg, mapped) repaired
         cmap = cmap if cmap is not None else CoordinateMap.load()
         try:
@@ -163,6 +164,7 @@ class OsimSource:
                               f"follow their constraints): {', '.join(self.held)}"
                               + (f"; dependent: {', '.join(self.dependent)}" if self.dependent else ""))
         self._constrained = model.getConstraintSet().getSize() > 0
+        self.box = self._source_box(coords)
         self._coord = [coords.get(m.coordinate) for m in self.mapped]
         self._col = np.array([JOINT_NAMES.index(m.joint) for m in self.mapped])
         self._sign = np.array([m.sign for m in self.mapped])
@@ -192,6 +194,23 @@ class OsimSource:
         self.version = {"file": str(self.path), "sha256": sha256(self.path),
                         "opensim": osim.__version__}
 
+    def _source_box(self, coords) -> tuple[np.ndarray, np.ndarray]:
+        """Our joints' ranges cut to the model's own coordinate ranges (mapped to ours): past
+        them a model's geometry is untested (MoBL's FCU wrapping fails past 70° of wrist
+        flexion, which ours reaches to 80°); the surrogate holds its edge value there."""
+        lo, hi = joint_box()
+        lo, hi = lo.copy(), hi.copy()
+        for m in self.mapped:
+            c, j = coords.get(m.coordinate), JOINT_NAMES.index(m.joint)
+            ends = sorted(m.sign * v + m.offset for v in (c.getRangeMin(), c.getRangeMax()))
+            lo[j], hi[j] = max(lo[j], ends[0]), min(hi[j], ends[1])
+            if hi[j] - lo[j] < math.radians(1.0):
+                raise MuscleModelError(
+                    f"{self.path}: coordinate {m.coordinate}'s range ({math.degrees(ends[0]):.1f}"
+                    f" to {math.degrees(ends[1]):.1f} deg as {m.joint}) leaves nothing of "
+                    f"{m.joint}'s range (check the map's sign and offset)")
+        return lo, hi
+
     def _read_parameters(self, mus) -> dict[str, float]:
         name, out = mus.getName(), {}
         for prop, ours, rule in PROPERTIES:
@@ -217,7 +236,7 @@ class OsimSource:
         return out
 
     def _find_spans(self) -> list[list[int]]:
-        lo, hi = joint_box()
+        lo, hi = self.box
         q = np.random.default_rng(12345).uniform(lo, hi, size=(SPAN_POSTURES, 20))
         _, R = self._evaluate(q, range(len(self._muscles)))
         big = np.abs(R).max(axis=0) > SPAN_MIN_M  # (muscles, 20)
@@ -311,6 +330,10 @@ class OsimSource:
             "dependent": self.dependent,
             "dropped_muscles": self.dropped,
             "excluded_muscles": self.excluded,
+            "fit_box_deg": {m.joint: [round(math.degrees(self.box[0][j]), 3),
+                                      round(math.degrees(self.box[1][j]), 3)]
+                            for m in self.mapped for j in [JOINT_NAMES.index(m.joint)]},
+            "fit_box_rule": self.box_rule,
             "nan_repaired": {n: len(v) for n, v in self.repaired.items()},
             "nan_repair_rule": (f"a posture where OpenSim gives a NaN length or moment arm "
                                 f"takes the values at a posture ~{REPAIR_DEG}° off"),
@@ -342,9 +365,17 @@ def action_checks(src: OsimSource) -> tuple[list[str], list[str]]:
 
 def build_osim(model: str | Path, out: str | Path, *, side: str = "right",
                cmap: CoordinateMap | None = None, seed: int = 0, sizes: FitSizes = OSIM_SIZES,
-               progress=print, exclude: tuple[str, ...] = ()) -> tuple[dict, OsimSource]:
-    """Fit the surrogates of `model`'s muscles; write the muscle model file `out`."""
+               progress=print, exclude: tuple[str, ...] = (),
+               source_box: bool = True) -> tuple[dict, OsimSource]:
+    """Fit the surrogates of `model`'s muscles; write the muscle model file `out`.
+    source_box: fit inside the model's own coordinate ranges (False: our joints' full
+    ranges, the model's geometry past its ranges included)."""
     src = OsimSource(model, side, cmap, progress, exclude)
+    if not source_box:
+        src.box = joint_box()
+    src.box_rule = ("our joints' ranges cut to the model's coordinate ranges (mapped); the "
+                    "surrogate holds its edge value outside" if source_box
+                    else "our joints' full ranges (--box ours)")
     if progress:
         progress(f"{src.path}: {len(src.names)} muscles at our joints "
                  f"({sum(map(len, src._pairs))} pairs), dropped (cross none of ours): "
@@ -354,7 +385,7 @@ def build_osim(model: str | Path, out: str | Path, *, side: str = "right",
         progress(f"anatomical actions (mid-range): {len(good)} as expected ({', '.join(good)})"
                  + (f"; NOT as expected, check the map's signs: {', '.join(bad)}" if bad else ""),
                  flush=True)
-    doc = build(Path(out), seed, None, src=src, source=src.source(), sizes=sizes)
+    doc = build(Path(out), seed, None, src=src, source=src.source(), sizes=sizes, box=src.box)
     return doc, src
 
 
@@ -367,6 +398,9 @@ def main(argv=None) -> int:
                     help="a coordinate map of your own (config/opensim_coordinates.yaml's format)")
     ap.add_argument("--side", choices=("right", "left"), default="right")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--box", choices=("source", "ours"), default="source",
+                    help="fit inside the model's own coordinate ranges (default) or over our "
+                         "joints' full ranges (the model's geometry past its ranges included)")
     ap.add_argument("--exclude", default="", metavar="M1,M2",
                     help="muscles to leave out (e.g. ones whose path wrapping fails: the report "
                          "lists pairs above 1 mm)")
@@ -381,7 +415,8 @@ def main(argv=None) -> int:
         cmap = CoordinateMap.load(args.map) if args.map is not None else None
         doc, src = build_osim(args.model, args.output, side=args.side, cmap=cmap,
                               seed=args.seed, sizes=sizes,
-                              exclude=tuple(n for n in args.exclude.split(",") if n))
+                              exclude=tuple(n for n in args.exclude.split(",") if n),
+                              source_box=args.box == "source")
     except ForearmDynamicsError as exc:
         print(f"source_osim: {exc}", file=sys.stderr)
         return exit_code_of(exc)
