@@ -13,6 +13,8 @@ sit above it). docs/muscles-api.md is the contract the node codes against.
 - `static_opt.py` — `StaticOptimizer`: min Σa² + Σ(r/r_opt)² s.t. R·F(a) + r = τ, daqp.
 - `fit.py` — `python -m forearm_dynamics.muscles.fit`: derives the shipped data file from
   MyoSuite's myo_sim MyoArm (MuJoCo; optional extra `muscles-fit`).
+- `source_osim.py` — `python -m forearm_dynamics.muscles.source_osim MODEL.osim -o FILE`:
+  the same file from a user's own OpenSim model (e.g. MoBL-ARMS; optional extra `reference`).
 """
 
 from __future__ import annotations

@@ -47,6 +47,7 @@ import json
 import math
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +110,20 @@ JUMP_TOL = 5e-4  # m: length step not explained by the moment arm over a 1° ste
 N_FIT = 20000
 N_TEST = 4000
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "data" / "muscles_myoarm.json"
+
+
+@dataclass(frozen=True)
+class FitSizes:
+    """How many postures build() asks of the source. The defaults are MyoArm's (MuJoCo's
+    tendon Jacobians, cheap); a slow source (OpenSim's computeMomentArm, 70-140 ms a posture
+    for MoBL-ARMS' 98 pairs: source_osim.py) takes fewer. n_edge_base: base postures per face and corner
+    (None: fit_core's N_EDGE / N_CORNER)."""
+
+    n_fit: int = N_FIT
+    n_test: int = N_TEST
+    n_edge_base: int | None = None
+    jump_bases: int = 6
+    n_envelope: int = 2000
 
 
 class MyoArm:
@@ -287,27 +302,33 @@ def write_heldout(src: MyoArm, path: Path, rng, n: int = 120, n_edge: int = 6) -
 
 
 def build(out: Path, seed: int = 0, heldout: Path | None = None,
-          xml: Path | None = None) -> dict:
+          xml: Path | None = None, *, src=None, source: dict | None = None,
+          sizes: FitSizes = FitSizes(), box: tuple | None = None) -> dict:
+    """MyoArm (or the MuJoCo model `xml`), or any `src` with MyoArm's interface (names,
+    evaluate, parameters: source_osim.OsimSource) described by `source` (provenance).
+    box: (lo, hi) rad of the fit (default our joints' ranges; the surrogate holds its edge
+    value outside it)."""
     t0 = time.perf_counter()
-    src = MyoArm(xml)
+    own = src is None
+    src = MyoArm(xml) if own else src
     rng = np.random.default_rng(seed)
-    lo, hi = joint_box()
-    bad = check_signs(src, lo, hi)
+    lo, hi = joint_box() if box is None else box
+    bad = check_signs(src, lo, hi) if own else []
     if bad:
         raise SystemExit("joint mapping gives the wrong action: " + "; ".join(bad))
     spans = find_spans(src, lo, hi, rng)
     center, half = 0.5 * (hi + lo), 0.5 * (hi - lo)
-    qf = rng.uniform(lo, hi, size=(N_FIT, 20))
-    qt = rng.uniform(lo, hi, size=(N_TEST, 20))
+    qf = rng.uniform(lo, hi, size=(sizes.n_fit, 20))
+    qt = rng.uniform(lo, hi, size=(sizes.n_test, 20))
     Lf, Rf = src.evaluate(qf)
     Lt, Rt = src.evaluate(qt)
     xf, xt = (qf - center) / half, (qt - center) / half
-    qef, moved_f = edge_postures(qf, lo, hi, spans)  # fitted (bases: fitting postures)
-    qet, moved_t = edge_postures(qt, lo, hi, spans)  # checked only (bases: held-out ones)
+    qef, moved_f = edge_postures(qf[:sizes.n_edge_base], lo, hi, spans)  # fitted
+    qet, moved_t = edge_postures(qt[:sizes.n_edge_base], lo, hi, spans)  # checked only
     Lef, Ref = src.evaluate(qef)
     Let, Ret = src.evaluate(qet)
     xef, xet = (qef - center) / half, (qet - center) / half
-    jumps = find_jumps(src, spans, lo, hi, rng)
+    jumps = find_jumps(src, spans, lo, hi, rng, sizes.jump_bases)
     muscles = []
     for i, name in enumerate(src.names):
         span = spans[i]
@@ -350,10 +371,10 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
               f"L {fit['rms'][0] * 1e3:.3f} mm  r max-RMS {fit['rms'][1:].max() * 1e3:.3f} mm "
               f"excl {fit['excluded']} sign viol {int(fit['sign_violations'].sum())} "
               f"constr {fit['sign_constraints']}", flush=True)
-    envelope_errors(src, muscles, center, half, rng)
+    envelope_errors(src, muscles, center, half, rng, sizes.n_envelope)
     if heldout is not None:
         write_heldout(src, heldout, np.random.default_rng(seed + 1000))
-    source = {
+    source = source if not own else {
         "name": "MyoSuite myo_sim MyoArm (myoarm_r), MuJoCo",
         "version": src.version,
         "licence": "Apache-2.0",
@@ -372,7 +393,7 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                            "pennation 0; "
                            "vmax 10 L0/s"),
     }
-    if xml is not None:
+    if own and xml is not None:
         source.update(name=f"MuJoCo model {xml}", licence="as stated by that model",
                       url=str(xml), notice="derived from the user's own model")
     doc = {
@@ -382,7 +403,7 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
         "body_size": {"reference": "50th-percentile male (model.yaml)"},
         "joints": {"names": list(JOINT_NAMES), "center": center.tolist(),
                    "half_range": half.tolist()},
-        "fit": {"samples": N_FIT, "held_out": N_TEST, "seed": seed, "target_mm": 1.0,
+        "fit": {"samples": sizes.n_fit, "held_out": sizes.n_test, "seed": seed, "target_mm": 1.0,
                 "edge_samples": len(qef), "edge_held_out": len(qet),
                 "sign_min_mm": SIGN_MIN_M * 1e3, "one_signed_min_mm": ONE_SIGNED_MIN_M * 1e3,
                 "max_degree": MAX_DEGREE, "max_terms": MAX_TERMS,

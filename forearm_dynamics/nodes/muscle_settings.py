@@ -33,8 +33,9 @@ MUSCLE_SPECS = (
          "its model, side and body size replace this node's own model parameters, following "
          "every live change; '' = never listen"),
     Spec("muscle_model", "", "muscle model file (JSON, forearm_dynamics.muscles/1, made by "
-         "python -m forearm_dynamics.muscles.fit from a MuJoCo model); '' = the shipped "
-         "MyoArm-derived model (Apache-2.0)"),
+         "python -m forearm_dynamics.muscles.fit from a MuJoCo model or "
+         "python -m forearm_dynamics.muscles.source_osim from an OpenSim .osim); '' = the "
+         "shipped MyoArm-derived model (Apache-2.0)"),
     Spec("decimation", 1, "solve and publish one input sample in every `decimation` (1 = every "
          "sample); the others are counted, not answered", "", 1, 1000),
     Spec("reserve_optimal_torque", 1.0, "optimal torque of each joint's reserve actuator: the cost "
