@@ -112,7 +112,7 @@ def callback_section(movements: list[int], domain: int) -> dict:
                 np.copyto(tpl.q, q[k])
                 np.copyto(tpl.qd, qd[k])
                 np.copyto(tpl.effort, tau[k])
-                tpl.pack_stamp(1 + mid, k * 1_000_000)
+                tpl.pack_stamp(1_000 * mid + k // 1000, k % 1000 * 1_000_000)
                 data = tpl.payload()
                 t0 = time.perf_counter_ns()
                 node._on_torques(data)
@@ -140,7 +140,7 @@ def _diag_stats(diag: list[dict], t0: float, t1: float) -> dict:
         return {"periods": 0}
     out = {"periods": len(rows)}
     for key in ("compute_us_p50", "compute_us_p99", "solve_us_p50", "solve_us_p99",
-                "publish_us_p50", "own_us_p50"):
+                "publish_us_p50", "own_us_p50", "executor_cpu_us_per_sample"):
         vals = np.array([float(r[key]) for r in rows if key in r])
         if len(vals):
             out[key] = float(np.median(vals))

@@ -110,6 +110,7 @@ class MuscleNode(MuscleStatus, Node):
         self._torque_config_id = None
         self.applies_from = 0
         self.stats = PipelineStats(REASONS)
+        self._cpu_mark: tuple[int, int] | None = None  # (thread CPU ns, published) per period
         self.decimated = 0
         self.reserve_use = 0
         self.infeasible = 0

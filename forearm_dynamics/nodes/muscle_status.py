@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import KeyValue
@@ -55,8 +56,21 @@ class MuscleStatus:
     def _publish_config(self, b: MuscleBundle, applies_from: int | None) -> None:
         self.config_pub.publish(String(data=json.dumps(self.config(b, applies_from))))
 
+    def _executor_cpu_us_per_sample(self) -> float:
+        """CPU time of this thread (the executor's: it runs every callback) since the last
+        period, per sample answered: what a sample costs the node on its thread, waits for
+        the CPU excluded (the callback's wall-clock compute_us includes them: on a loaded
+        machine at nice 10 it is preempted). Read once per period: no per-sample clock."""
+        now, done = time.thread_time_ns(), self.stats.published
+        last = self._cpu_mark
+        self._cpu_mark = (now, done)
+        if last is None or done == last[1]:
+            return float("nan")
+        return (now - last[0]) / (done - last[1]) / 1e3
+
     def _publish_diagnostics(self) -> None:
         v.flush_suppressed(self._warned, self.get_logger(), WARN_EVERY_S)
+        cpu = self._executor_cpu_us_per_sample()
         status = self.stats.status(f"{self.get_name()}: muscles", self.get_fully_qualified_name())
         n = min(self._n_solve, len(self._solve_ns))
         if n:
@@ -66,6 +80,7 @@ class MuscleStatus:
         self._n_solve = 0
         b = self.bundle
         values = {
+            "executor_cpu_us_per_sample": f"{cpu:.1f}",
             "solve_us_p50": f"{p50:.1f}", "solve_us_p99": f"{p99:.1f}", "solve_us_max": f"{pmax:.1f}",
             "decimation": str(self.settings.decimation), "decimated_total": str(self.decimated),
             "reserve_use_total": str(self.reserve_use),
