@@ -18,9 +18,11 @@ Why JointState (not a message of our own): every tool reads it already (ros2 top
 
 Per sample: the muscle model's moment arms, lengths and speeds at q, q̇ (polynomial
 surrogates), then the static optimisation (min Σa² + Σ(r/r_opt)² s.t. R·F(a) + r = τ,
-0 ≤ a ≤ 1; daqp, warm-started from the previous sample): forearm_dynamics/muscles. The bytes
-are read through the stream nodes' cached input plans (input_plans.py: one parse per message
-shape, numpy views after that) and written into preallocated CDR templates.
+0 ≤ a ≤ 1; daqp, warm-started from the previous sample): forearm_dynamics/muscles. No
+message objects on the hot path: the bytes are read through the stream nodes' cached input
+plans (input_plans.py: one parse per message shape) and one numpy take, and the outputs are
+written into preallocated CDR templates (muscle_io.py, over codec/jointstate_cdr.py);
+~/config, /diagnostics and the shutdown summary are muscle_status.py.
 
 The muscle model follows the torque node: its config (torque_node/config, latched) names the
 model, body size and side; each change there (a live change of the torque node) rebuilds
