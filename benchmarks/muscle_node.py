@@ -6,6 +6,12 @@ Sections (each states the load average; 2 cores):
 - `solve`: in process, no ROS: the 65 movements at 1 kHz (torques by Pinocchio from the exact
   q, q̇, q̈), per sample: geometry (surrogate moment arms, lengths, speeds), the QP alone
   (MuscleSolution.solve_time) and both; p50/p99 in µs.
+- `callback`: in process, a real MuscleNode (rclpy; its publishers have no reader) fed the
+  torque node's bytes (the 65 movements' torques, CDR as torque_node writes them), each call of
+  its joint_torques callback timed (p50/p99 µs) beside the node's own split (publish, own):
+  the node's cost without DDS delivery and other processes. Read it against `solve` (the
+  geometry + QP alone, same run): the difference is the node's reading, writing and
+  bookkeeping.
 - `chain`: trajectory_publisher -> torque_node -> muscle_node -> receiver at 1 kHz over the
   movements (real processes, loopback DDS): muscle_forces received (unique stamps) vs
   samples sent (lost), muscle_node's own callback time and QP time from its /diagnostics
@@ -80,6 +86,52 @@ def solve_section(movements: list[int]) -> dict:
             "infeasible_samples": int(infeasible), "loadavg": [load0, loadavg()]}
 
 
+def callback_section(movements: list[int], domain: int) -> dict:
+    """Time MuscleNode's joint_torques callback in this process (see the module docstring)."""
+    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    import rclpy
+
+    from forearm_dynamics.codec.jointstate_cdr import OutputTemplate
+    from forearm_dynamics.description import JOINT_NAMES
+    from forearm_dynamics.nodes.muscle_node import MuscleNode
+
+    arm = build_model("segmented", 50)
+    tpl = OutputTemplate(JOINT_NAMES, "")  # what torque_node publishes: the same codec
+    rclpy.init(args=["--ros-args", "-p", "nice:=0", "-p", "diagnostics_period:=0.0",
+                     "-p", "config_topic:=''"])
+    load0 = loadavg()
+    try:
+        node = MuscleNode()
+        calls, own, pub = [], [], []
+        stats = node.stats
+        for mid in movements:
+            mv = get_movement(mid)
+            q, qd, qdd = mv.evaluate(mv.sample_times(1000.0))
+            tau = arm.inverse_dynamics_batch(q, qd, qdd)
+            for k in range(len(q)):
+                np.copyto(tpl.q, q[k])
+                np.copyto(tpl.qd, qd[k])
+                np.copyto(tpl.effort, tau[k])
+                tpl.pack_stamp(1_000 * mid + k // 1000, k % 1000 * 1_000_000)
+                data = tpl.payload()
+                t0 = time.perf_counter_ns()
+                node._on_torques(data)
+                calls.append(time.perf_counter_ns() - t0)
+                i = (stats._n - 1) % stats._window
+                own.append(stats._compute_ns[i] - stats._publish_ns[i])
+                pub.append(stats._publish_ns[i])
+        out = {"samples": len(calls), "published": stats.published,
+               "rejected": sum(stats.rejected.values()), "callback_us": percentiles(calls, 1e-3),
+               "node_compute_minus_publish_us": percentiles(own, 1e-3),
+               "node_publish_us": percentiles(pub, 1e-3),
+               "note": "publishers without readers: publish() here is not the DDS delivery of "
+                       "the chain", "loadavg": [load0, loadavg()]}
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+    return out
+
+
 def _diag_stats(diag: list[dict], t0: float, t1: float) -> dict:
     rows = [d["values"] for d in diag if t0 <= d["t"] <= t1 + 1.5
             and float(d["values"].get("output_rate_hz", 0)) > 0
@@ -88,7 +140,7 @@ def _diag_stats(diag: list[dict], t0: float, t1: float) -> dict:
         return {"periods": 0}
     out = {"periods": len(rows)}
     for key in ("compute_us_p50", "compute_us_p99", "solve_us_p50", "solve_us_p99",
-                "publish_us_p50", "own_us_p50"):
+                "publish_us_p50", "own_us_p50", "executor_cpu_us_per_sample"):
         vals = np.array([float(r[key]) for r in rows if key in r])
         if len(vals):
             out[key] = float(np.median(vals))
@@ -219,6 +271,13 @@ def main(argv: list[str] | None = None) -> int:
     if "solve" in sections:
         out["solve"] = solve_section(movements)
         print(json.dumps(out["solve"], indent=1), file=sys.stderr)
+    if "callback" in sections:
+        lease = claim_domain_arg(ap, args.domain, "benchmarks.muscle_node")
+        out["callback"] = callback_section(movements, lease.domain)
+        lease.release()
+        print(json.dumps({k: out["callback"][k] for k in ("callback_us",
+                          "node_compute_minus_publish_us", "node_publish_us")}, indent=1),
+              file=sys.stderr)
     if "opensim" in sections:
         out["opensim"] = opensim_section()
         print(json.dumps(out["opensim"].get("summary"), indent=1), file=sys.stderr)

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import rosproc
+from rclpy.serialization import deserialize_message
+from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
 
 from forearm_dynamics import JOINT_NAMES, build_model
@@ -123,6 +125,38 @@ def test_every_torque_answered_with_its_header_and_the_offline_numbers(procs, pe
     np.testing.assert_allclose([m.effort for m in client.forces], off.forces, rtol=0, atol=1e-6)
     np.testing.assert_allclose([m.effort for m in client.reserves], off.reserves, rtol=0, atol=1e-9)
     assert a.max() > 0.01  # muscles do work here
+    assert node.stop() == 0
+
+
+def test_published_bytes_are_canonical_jointstate_cdr(procs, peer):
+    """What the node puts on the wire (raw subscriptions: the bytes as DDS delivers them), read
+    by two independent deserialisers (rosbags' own CDR code and rclpy's) to the same numbers
+    exactly, with the input's header, and equal byte for byte what rosbags' serialiser makes
+    of that message (zero padding, exact size): the fast path's output is the slow path's."""
+    node = procs.start("muscle_node", "-p", "input_reliable:=true", "-p", "config_topic:=''")
+    client = Client(peer)
+    raw: dict[str, list[bytes]] = {"muscle_forces": [], "muscle_reserves": []}
+    for topic, got in raw.items():
+        peer.node.create_subscription(JointState, topic, got.append, stream_qos(1000), raw=True)
+    client.ready(node)
+    q, qd, tau = _torques(40)
+    stamps = client.stream(q, qd, tau)
+    assert peer.spin_until(lambda: all(len(g) >= len(stamps) for g in raw.values()), 60.0), \
+        {k: len(g) for k, g in raw.items()}
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    mm = load_muscle_model()
+    for topic, names in (("muscle_forces", mm.names), ("muscle_reserves", JOINT_NAMES)):
+        assert len(raw[topic]) == len(stamps)
+        for data, stamp in zip(raw[topic], stamps, strict=True):
+            ours = ts.deserialize_cdr(data, "sensor_msgs/msg/JointState")
+            theirs = deserialize_message(data, JointState)
+            assert (ours.header.stamp.sec, ours.header.stamp.nanosec) == divmod(stamp, 10**9)
+            assert ours.header.frame_id == theirs.header.frame_id == "arm"
+            assert tuple(ours.name) == tuple(theirs.name) == tuple(names)
+            for field in ("position", "velocity", "effort"):
+                assert np.array_equal(getattr(ours, field), np.asarray(getattr(theirs, field)))
+            assert bytes(ts.serialize_cdr(ours, "sensor_msgs/msg/JointState")) == data
+        assert len(ours.effort) == len(names)
     assert node.stop() == 0
 
 

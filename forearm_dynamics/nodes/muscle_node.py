@@ -18,9 +18,11 @@ Why JointState (not a message of our own): every tool reads it already (ros2 top
 
 Per sample: the muscle model's moment arms, lengths and speeds at q, q̇ (polynomial
 surrogates), then the static optimisation (min Σa² + Σ(r/r_opt)² s.t. R·F(a) + r = τ,
-0 ≤ a ≤ 1; daqp, warm-started from the previous sample): forearm_dynamics/muscles. The bytes
-are read through the stream nodes' cached input plans (input_plans.py: one parse per message
-shape, numpy views after that) and written into preallocated CDR templates.
+0 ≤ a ≤ 1; daqp, warm-started from the previous sample): forearm_dynamics/muscles. No
+message objects on the hot path: the bytes are read through the stream nodes' cached input
+plans (input_plans.py: one parse per message shape) and one numpy take, and the outputs are
+written into preallocated CDR templates (muscle_io.py, over codec/jointstate_cdr.py);
+~/config, /diagnostics and the shutdown summary are muscle_status.py.
 
 The muscle model follows the torque node: its config (torque_node/config, latched) names the
 model, body size and side; each change there (a live change of the torque node) rebuilds
@@ -42,23 +44,24 @@ import time
 
 import numpy as np
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..codec.jointstate_cdr import STAMP, OutputTemplate, StdTemplate
+from ..codec.jointstate_cdr import STAMP
 from ..description import JOINT_NAMES
 from ..model_config import model_from_config
 from ..muscles import MuscleModelError
 from ..version import package_version
 from . import validation as v
 from .common import latched_qos, main_for, stream_qos
-from .diagnostics import PipelineStats, diagnostic_array
+from .diagnostics import PipelineStats
 from .input_plans import GENERIC, InputPlans
 from .model_builder import ModelBuilder
+from .muscle_io import NO_EFFORT, NO_VELOCITY, OutputTemplates, StateReader
 from .muscle_settings import (
     MODEL_NAMES,
     SPECS,
@@ -68,18 +71,15 @@ from .muscle_settings import (
     build_bundle,
     own_arm,
 )
+from .muscle_status import WARN_EVERY_S, MuscleStatus
 from .params import ParameterError, Params, init_node
 
-WARN_EVERY_S = 1.0
-NO_EFFORT = "no_effort"  # a JointState without torques (not a torque node's output)
-NO_VELOCITY = "no_velocity"
 REASONS = (*v.REASONS, NO_EFFORT, NO_VELOCITY)
-TEMPLATES = 8  # per frame_id
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
 _MODEL_KEYS = ("model", "body_size", "side", "payload", "placement", "joint_names", "schema")
 
 
-class MuscleNode(Node):
+class MuscleNode(MuscleStatus, Node):
     """Static optimisation of every torque sample (see the module docstring)."""
 
     def __init__(self, node_name: str = "muscle_node"):
@@ -112,6 +112,7 @@ class MuscleNode(Node):
         self._torque_config_id = None
         self.applies_from = 0
         self.stats = PipelineStats(REASONS)
+        self._cpu_mark: tuple[int, int] | None = None  # (thread CPU ns, published) per period
         self.decimated = 0
         self.reserve_use = 0
         self.infeasible = 0
@@ -125,10 +126,10 @@ class MuscleNode(Node):
         self._names = v.NameMatcher(JOINT_NAMES)
         self._plans = InputPlans(self._names)
         self._plan = GENERIC
-        self._effort_views: dict[int, np.ndarray | v.Rejection] = {}
-        nj = len(JOINT_NAMES)
-        self.q, self.qd, self.tau = np.zeros(nj), np.zeros(nj), np.zeros(nj)
-        self._templates: dict[bytes, tuple[OutputTemplate, StdTemplate]] = {}
+        self._reader = StateReader(s.input_topic, len(JOINT_NAMES))
+        self._state = self._reader.state
+        self.q, self.qd, self.tau = self._state  # views: the reader writes them
+        self._outputs = OutputTemplates(self.bundle.model.names, JOINT_NAMES)
         self._stamp = STAMP.unpack_from
         self._geo = self.bundle.model.geometry_outputs()  # R, L, V: written per sample
 
@@ -172,20 +173,13 @@ class MuscleNode(Node):
             else:
                 if plan.rejection is not None:
                     raise plan.rejection
-                eff = self._effort_views.get(id(plan))
-                if eff is None:
-                    eff = self._effort_views[id(plan)] = self._effort_view(plan)
-                if isinstance(eff, v.Rejection):
-                    raise eff
                 plan.buf[:] = data
-                plan.pos.take(plan.index, out=self.q)
-                plan.vel.take(plan.index, out=self.qd)
-                eff.take(plan.index, out=self.tau)
+                self._reader.read(plan)
                 sec, nsec = self._stamp(data, 4)
                 if not (sec or nsec) or nsec >= 1_000_000_000 or sec < 0:
                     raise v.bad_stamp(sec, nsec)
                 frame_id = plan.layout.frame_id
-            if not math.isfinite(self.q.sum() + self.qd.sum() + self.tau.sum()):
+            if not math.isfinite(self._state.sum()):
                 raise self._nonfinite()
         except v.Rejection as r:
             st.rejected[r.reason] += 1
@@ -198,8 +192,7 @@ class MuscleNode(Node):
         nxt = self._next
         if nxt is not None:  # a rebuilt model: from this sample on
             self._next = None
-            if nxt.model.names != self.bundle.model.names:
-                self._templates.clear()
+            self._outputs.rename(nxt.model.names)
             self.bundle = nxt
             self._geo = nxt.model.geometry_outputs()
             self.applies_from = sec * 1_000_000_000 + nsec
@@ -207,14 +200,7 @@ class MuscleNode(Node):
         b = self.bundle
         R, L, V = b.model.geometry(self.q, self.qd, self._geo)
         sol = b.optimizer.solve_geometry(R, L, V, self.tau)
-        tpl = self._templates.get(frame_id)
-        if tpl is None:
-            tpl = self._template(frame_id)
-        out, res = tpl
-        if sol.exitflag < 1:
-            self.solver_failed += 1
-        if sol.infeasible:
-            self.infeasible += 1
+        out, res = self._outputs.get(frame_id)
         np.copyto(out.q, sol.activations)
         np.copyto(out.effort, sol.forces)
         np.copyto(out.qd, V)
@@ -224,27 +210,21 @@ class MuscleNode(Node):
         if self.reserves_pub is not None:
             self.reserves_pub.publish(res.fill(sec, nsec, sol.reserves))
         t_end = _perf_ns()
-        absr = np.abs(sol.reserves)
-        big = float(absr.max())
+        # bookkeeping after the clock stops: counters and rings the diagnostics timer reads
+        if sol.exitflag < 1:
+            self.solver_failed += 1
+        if sol.infeasible:
+            self.infeasible += 1
+        r = sol.reserves
+        big = max(r.max(), -r.min())
         if big > self._reserve_warn:
             self.reserve_use += 1
             if big > self._max_reserve[0]:
-                self._max_reserve = (big, JOINT_NAMES[int(absr.argmax())])
+                self._max_reserve = (float(big), JOINT_NAMES[int(np.abs(r).argmax())])
         self._solve_ns[self._n_solve % len(self._solve_ns)] = round(sol.solve_time * 1e9)
         self._n_solve += 1
         st.published += 1
         st.record(t_end - t_start, recv_ns - (sec * 1_000_000_000 + nsec), t_end - t_pub)
-
-    def _effort_view(self, plan):
-        lay = plan.layout
-        n = len(lay.names)
-        if lay.n_eff != n:
-            return v.Rejection(NO_EFFORT, f"{self.settings.input_topic}: {lay.n_eff} efforts for "
-                               f"{n} names: not joint torques (the torque node's output)")
-        if lay.n_vel != n:
-            return v.Rejection(NO_VELOCITY, f"{self.settings.input_topic}: no velocities "
-                               "(the muscles' force-velocity needs them)")
-        return lay.array(plan.buf, "effort")
 
     def _ingest_generic(self, data: bytes) -> tuple[int, int, bytes]:
         try:
@@ -272,14 +252,6 @@ class MuscleNode(Node):
             if not np.isfinite(x).all():
                 return v.Rejection(v.NON_FINITE, self._names.nonfinite_detail(field, x))
         return v.Rejection(v.NON_FINITE, "overflow")
-
-    def _template(self, frame_id: bytes) -> tuple[OutputTemplate, StdTemplate]:
-        if len(self._templates) >= TEMPLATES:
-            self._templates.pop(next(iter(self._templates)))
-        names = self.bundle.model.names
-        frame = frame_id.decode("utf-8")
-        t = self._templates[frame_id] = (OutputTemplate(names, frame), StdTemplate(JOINT_NAMES, frame))
-        return t
 
     def _warn(self, r: v.Rejection) -> None:
         v.warn_rejection(self._warned, self.get_logger(), r, WARN_EVERY_S)
@@ -338,71 +310,6 @@ class MuscleNode(Node):
 
     def _announce(self, bundle: MuscleBundle, stamp_ns: int) -> None:
         self._publish_config(bundle, stamp_ns)
-
-    # -- config and diagnostics ----------------------------------------------------------
-    def config(self, b: MuscleBundle, applies_from: int | None) -> dict:
-        s = self.settings
-        return {
-            "node": self.get_fully_qualified_name(), "version": self._version,
-            "config_id": b.config_id, "applies_from_stamp_ns": applies_from,
-            "input_topic": self.sub.topic_name if hasattr(self, "sub") else s.input_topic,
-            "output_topic": self.pub.topic_name,
-            "reserves_topic": self.reserves_pub.topic_name if self.reserves_pub is not None else None,
-            "layout": {"output": "sensor_msgs/JointState: name = muscles, position = activation "
-                                 "(0..1), velocity = muscle-tendon lengthening speed (m/s), effort = "
-                                 "tendon force (N)",
-                       "reserves": "sensor_msgs/JointState: name = joints, effort = reserve "
-                                   "torque (N*m)"},
-            "arm": b.arm_summary, "model_source": b.source,
-            "torque_config_id": self._torque_config_id if b.source != "own parameters" else None,
-            "muscles": b.model.config(),
-            "solver": {"method": "static optimisation per sample, daqp (warm-started)",
-                       "cost": "sum a^2 + sum (r / reserve_optimal_torque)^2",
-                       "reserve_optimal_torque": s.reserve_optimal_torque,
-                       "force_velocity": s.force_velocity, "passive": s.passive,
-                       "tendon": "rigid"},
-            "decimation": s.decimation, "build_ms": round(b.build_ms, 3),
-            "input_qos": "reliable" if s.input_reliable else "best effort",
-            "input_depth": s.input_depth, "nice": os.nice(0),
-        }
-
-    def _publish_config(self, b: MuscleBundle, applies_from: int | None) -> None:
-        self.config_pub.publish(String(data=json.dumps(self.config(b, applies_from))))
-
-    def _publish_diagnostics(self) -> None:
-        v.flush_suppressed(self._warned, self.get_logger(), WARN_EVERY_S)
-        status = self.stats.status(f"{self.get_name()}: muscles", self.get_fully_qualified_name())
-        n = min(self._n_solve, len(self._solve_ns))
-        if n:
-            p50, p99, pmax = (np.percentile(self._solve_ns[:n], (50, 99, 100)) / 1e3).tolist()
-        else:
-            p50 = p99 = pmax = float("nan")
-        self._n_solve = 0
-        b = self.bundle
-        values = {
-            "solve_us_p50": f"{p50:.1f}", "solve_us_p99": f"{p99:.1f}", "solve_us_max": f"{pmax:.1f}",
-            "decimation": str(self.settings.decimation), "decimated_total": str(self.decimated),
-            "reserve_use_total": str(self.reserve_use),
-            "reserve_max_nm": f"{self._max_reserve[0]:.3f}",
-            "reserve_max_joint": self._max_reserve[1] or "none",
-            "infeasible_total": str(self.infeasible), "solver_failed_total": str(self.solver_failed),
-            "config_id": str(b.config_id), "muscles": str(b.model.n),
-            "model": f"{b.arm_summary['body_size']} {b.model.side} arm ({b.source})",
-        }
-        status.values.extend(KeyValue(key=k, value=x) for k, x in values.items())
-        if self.infeasible and status.level == status.OK:
-            status.level = status.WARN
-            status.message = f"{self.infeasible} infeasible sample(s) (reserves carry torque)"
-        self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
-        self._publish_config(self.bundle, self.applies_from)
-
-    def summary(self) -> str:
-        st = self.stats
-        rejected = {k: n for k, n in st.rejected.items() if n}
-        return (f"summary: received {st.received}, solved {st.published}, decimated "
-                f"{self.decimated}, rejected {sum(rejected.values())}"
-                + (f" ({', '.join(f'{k} {n}' for k, n in rejected.items())})" if rejected else "")
-                + f", infeasible {self.infeasible}, reserve use {self.reserve_use}")
 
     def destroy_node(self) -> None:
         worker = getattr(self, "_worker", None)
