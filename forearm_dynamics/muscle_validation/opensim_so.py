@@ -84,35 +84,27 @@ def _expand(coefs: np.ndarray, exps: np.ndarray, center: np.ndarray, half: np.nd
     return out
 
 
-_PRIMES = (2.0, 3.0, 5.0, 7.0, 11.0, 13.0, 17.0, 19.0, 23.0, 29.0)
-
-
 def _opensim_term_order(osim, dim: int, order: int) -> list[tuple[int, ...]]:
     """The exponents of each coefficient of OpenSim's MultivariatePolynomialFunction of this
-    dimension and order, found by evaluating its terms at distinct primes and factoring (no
-    reliance on a documented ordering)."""
+    dimension and order, found by evaluating its terms with one variable at 2 and the others
+    at 1 (each term is then 2^(its exponent of that variable), exact in a double at any
+    order; distinct primes at once overflowed 2^53 at order 19 in 4 dimensions): no
+    reliance on a documented ordering."""
     n = math.comb(dim + order, order)
     f = osim.MultivariatePolynomialFunction()
     f.setDimension(dim)
     f.setOrder(order)
     f.setCoefficients(osim.Vector(n, 0.0))
-    x = osim.Vector(dim, 0.0)
+    exps = np.zeros((n, dim), int)
     for i in range(dim):
-        x.set(i, _PRIMES[i])
-    terms = f.getTermValues(x).to_numpy()
-    keys = []
-    for v in terms:
-        v = round(float(v))
-        e = []
-        for p in _PRIMES[:dim]:
-            k = 0
-            while v % int(p) == 0:
-                v //= int(p)
-                k += 1
-            e.append(k)
-        if v != 1:
+        x = osim.Vector(dim, 1.0)
+        x.set(i, 2.0)
+        terms = f.getTermValues(x).to_numpy()
+        e = np.rint(np.log2(terms)).astype(int)
+        if len(terms) != n or np.any(terms != 2.0 ** e):
             raise RuntimeError("could not read OpenSim's polynomial term order")
-        keys.append(tuple(e))
+        exps[:, i] = e
+    keys = [tuple(int(v) for v in row) for row in exps]
     if len(set(keys)) != n:
         raise RuntimeError("OpenSim's polynomial terms are not distinct monomials")
     return keys

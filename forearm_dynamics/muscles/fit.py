@@ -58,6 +58,8 @@ from .fit_core import (
     MAX_DEGREE,
     MAX_TERMS,
     ONE_SIGNED_MIN_M,
+    OPENSIM_MAX_TERMS,
+    PAIR_DEGREES,
     SIGN_MIN_M,
     design,
     edge_postures,
@@ -364,13 +366,15 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                 "sign_violations": {jn: int(fit["sign_violations"][k])
                                     for k, jn in enumerate(joints)},
                 "sign_constraints": fit["sign_constraints"],
+                "pair_bases": {joints[k]: {"joints": [joints[j] for j in S], "degree": D}
+                               for k, (S, D) in fit["pair_bases"].items()},
                 "jumps": sum(1 for jp in jumps if jp["muscle"] == name),
             },
         })
         print(f"{name:8s} deg {fit['degree']} K {len(fit['exps']):4d} "
               f"L {fit['rms'][0] * 1e3:.3f} mm  r max-RMS {fit['rms'][1:].max() * 1e3:.3f} mm "
               f"excl {fit['excluded']} sign viol {int(fit['sign_violations'].sum())} "
-              f"constr {fit['sign_constraints']}", flush=True)
+              f"constr {fit['sign_constraints']} pairs {fit['pair_bases']}", flush=True)
     envelope_errors(src, muscles, center, half, rng, sizes.n_envelope)
     if heldout is not None:
         write_heldout(src, heldout, np.random.default_rng(seed + 1000))
@@ -407,6 +411,7 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                 "edge_samples": len(qef), "edge_held_out": len(qet),
                 "sign_min_mm": SIGN_MIN_M * 1e3, "one_signed_min_mm": ONE_SIGNED_MIN_M * 1e3,
                 "max_degree": MAX_DEGREE, "max_terms": MAX_TERMS,
+                "pair_degrees": list(PAIR_DEGREES), "opensim_max_terms": OPENSIM_MAX_TERMS,
                 "jump_tolerance_mm": JUMP_TOL * 1e3, "jumps": jumps[:200],
                 "n_jumps": len(jumps), "seconds": round(time.perf_counter() - t0, 1)},
         "muscles": muscles,

@@ -48,12 +48,16 @@ def pairs_markdown(doc: dict) -> str:
             else "not recorded in this file") + ".", "",
         ("<details><summary>Every pair: RMS / max over the full ranges, RMS in the movements' "
         "box (mm)</summary>"), "",
+        ("Degree: the muscle's total degree; `joint: + a × b to D`: that pair's own basis adds "
+         "every monomial of degree ≤ D in joints a, b (fit_core.refine_pairs)."), "",
         "| muscle | degree | pairs: joint full RMS / max, box RMS |", "|---|---|---|"]
     for m in doc["muscles"]:
         fit = m["fit"]
         cells = "; ".join(f"{j} {fit['moment_arm_rms_mm'][j]:.2f} / {fit['moment_arm_max_mm'][j]:.1f}, "
                           f"{fit['movement_box_moment_arm_rms_mm'][j]:.2f}" for j in m["spans"])
-        out.append(f"| {m['name']} | {fit['degree']} | {cells} |")
+        own = "".join(f"; {j}: + {' × '.join(b['joints'])} to {b['degree']}"
+                      for j, b in fit.get("pair_bases", {}).items())
+        out.append(f"| {m['name']} | {fit['degree']}{own} | {cells} |")
     out += ["", "</details>"]
     return "\n".join(out)
 

@@ -7,10 +7,13 @@ normalised joint angles x = (q − centre) / half_range of the fit box (the READ
 a posture outside the box is held at its edge (x clipped to [−1, 1]): polynomials do not
 extrapolate, and the geometry there was not fitted.
 
-Evaluation: every distinct monomial of every muscle is evaluated once, degree by degree (a
-monomial of degree d = one of degree d − 1 times one variable: the set of each muscle's
-monomials of total degree <= D holds every such parent), then one sparse matrix maps the
-monomials to the n lengths and the spanned (muscle, joint) moment arms.
+Evaluation: every distinct monomial of every muscle is evaluated once, then one sparse matrix
+maps the monomials to the n lengths and the spanned (muscle, joint) moment arms. A monomial
+of degree d >= 2 is the product of two of degree ⌊d/2⌋ and ⌈d/2⌉ (its divisors: each
+muscle's set of monomials holds every divisor of its members, fit_core.refine_pairs), so the
+monomials come in ⌈log2 D⌉ + 1 vectorised steps (degree 1, 2, 3-4, 5-8, 9-16, 17-32), not D:
+a pair fitted to degree 20 (FCU about the wrist) costs 6 steps, not 20 (each ~1-2 µs of
+NumPy call overhead per sample).
 """
 
 from __future__ import annotations
@@ -72,22 +75,33 @@ class Surrogate:
         degree = np.array([sum(k) for k in keys])
         if len(keys) == 0 or degree[0] != 0 or np.any(np.diff(degree) < 0):
             raise ValueError("monomials must be sorted by degree, the constant first")
-        self.levels = []  # (slice, parent positions) per degree
-        variables = [0]  # per monomial: the variable (index into [1, x...]) it adds
-        for d in range(1, int(degree.max()) + 1):
-            at = np.nonzero(degree == d)[0]
-            parents, var = [], []
+        self.levels = []  # (slice, first parents, second parents) per step
+        top = int(degree.max())
+        bounds = [1] + [2 ** s for s in range(1, max(1, (top - 1).bit_length()) + 1)]
+        variables = np.zeros(len(keys), int)  # degree 1: the variable (index into [1, x...])
+        for lo_d, hi_d in zip([1] + [b + 1 for b in bounds[:-1]], bounds):
+            at = np.nonzero((degree >= lo_d) & (degree <= hi_d))[0]
+            if len(at) == 0:
+                continue
+            pa, pb = [], []
             for i in at:
-                k = list(keys[i])
-                j = next(j for j, e in enumerate(k) if e)
-                k[j] -= 1
-                parents.append(pos[tuple(k)])
-                var.append(j + 1)
-            self.levels.append((slice(int(at[0]), int(at[-1]) + 1), np.array(parents)))
-            variables += var
-        self.variables = np.array(variables)
-        # one sample's scratch: the parents' values of the widest level, the variables
-        self._parents = np.empty(max((len(p) for _, p in self.levels), default=0))
+                k = np.array(keys[i])
+                if lo_d == 1:  # x_j = 1 · x_j: the constant times the variable
+                    variables[i] = int(np.nonzero(k)[0][0]) + 1
+                    pa.append(0)
+                    continue
+                half_d, a = sum(keys[i]) // 2, np.zeros_like(k)
+                for j in np.nonzero(k)[0]:  # the first ⌊d/2⌋ exponents, in joint order
+                    a[j] = min(k[j], half_d - a.sum())
+                pa.append(pos[tuple(a)])
+                pb.append(pos[tuple(k - a)])
+            self.levels.append((slice(int(at[0]), int(at[-1]) + 1), np.array(pa),
+                                np.array(pb) if pb else None))
+        self.variables = variables[: len(self.levels[0][1]) + 1] if self.levels else variables[:1]
+        # one sample's scratch: the parents' values of the widest step, the variables
+        width = max((len(p) for _, p, _ in self.levels), default=0)
+        self._parents = np.empty(width)
+        self._parents_b = np.empty(width)
         self._xv = np.empty(len(self.variables))
 
     @classmethod
@@ -184,20 +198,26 @@ class Surrogate:
         return np.clip((q - self.center) * self.inv_half, -1.0, 1.0)
 
     def _monomials(self, xe: np.ndarray, mono: np.ndarray) -> np.ndarray:
-        """Fill mono (..., K) from xe (..., 21) = [1, x], degree by degree."""
-        xv = xe[..., self.variables]  # one gather for every level
-        for sl, parent in self.levels:
-            np.multiply(mono[..., parent], xv[..., sl], out=mono[..., sl])
+        """Fill mono (..., K) from xe (..., 21) = [1, x], step by step (see the module)."""
+        xv = xe[..., self.variables]  # the degree-1 monomials: [1, x_j...]
+        for sl, pa, pb in self.levels:
+            np.multiply(mono[..., pa], xv[..., sl] if pb is None else mono[..., pb],
+                        out=mono[..., sl])
         return mono
 
     def _monomials_one(self, xe: np.ndarray) -> np.ndarray:
         """_monomials for one posture, into arrays made once (same products, same order)."""
-        mono, xv, par = self._mono, self._xv, self._parents
+        mono, xv = self._mono, self._xv
         xe.take(self.variables, out=xv)
-        for sl, parent in self.levels:
-            p = par[: len(parent)]
-            mono.take(parent, out=p)
-            np.multiply(p, xv[sl], out=mono[sl])
+        for sl, pa, pb in self.levels:
+            p = self._parents[: len(pa)]
+            mono.take(pa, out=p)
+            if pb is None:
+                np.multiply(p, xv[sl], out=mono[sl])
+            else:
+                q = self._parents_b[: len(pb)]
+                mono.take(pb, out=q)
+                np.multiply(p, q, out=mono[sl])
         return mono
 
     def new_outputs(self) -> tuple[np.ndarray, np.ndarray]:
