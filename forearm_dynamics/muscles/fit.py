@@ -26,6 +26,8 @@ our BSD-3 package can carry (Apache-2.0; MoBL-ARMS is non-commercial). What the 
    muscle, the smallest that reaches 1 mm on held-out samples with no sign error, at most
    MAX_DEGREE and MAX_TERMS) to the source's own length (`ten_length`) and moment arms
    (−`ten_J`, MuJoCo's analytic tendon Jacobian, not a finite difference of the length).
+   A pair that no total degree brings to the target gets its own basis on top
+   (fit_core.refine_pairs: a high degree in the one or two joints its error depends on).
    Sign: wherever the source's moment arm is clearly non-zero (|r| > SIGN_MIN_M), and
    everywhere a pair is one-signed in the source (|r| > ONE_SIGNED_MIN_M: BRA flexes the
    elbow even at 0°, +0.68 mm), the fitted moment arm must have the source's sign; a least
