@@ -87,6 +87,46 @@ def _kernels(dt: float, cutoff_hz: float, half_s: float) -> np.ndarray:
     return k
 
 
+class PracticeWindow:
+    """The raw positions of the last 2h + 1 samples and two causal estimates of each of the
+    last h + 1: the practice of the sample h back (kernels on the window) beside the causal
+    estimates made for that same sample. One ring for both judges of the causal estimate
+    against the practice: the practice gain (below) and the selector (selector.py)."""
+
+    def __init__(self, n: int, kernels: np.ndarray, every: int):
+        self.k = kernels  # (p, 2h + 1) or (2h + 1,), oldest sample first
+        self.h = h = (kernels.shape[-1] - 1) // 2
+        self.every = every
+        self._q = np.zeros((2 * (2 * h + 1), n))
+        self._x = np.zeros((h + 1, 2, n))
+        self.ref = np.zeros(kernels.shape[:-1] + (n,))  # the practice of the sample h back
+        self.count = 0
+
+    def restart(self) -> None:
+        """No kernel spans this point (a gap, a restarted filter)."""
+        self.count = 0
+
+    def push(self, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+        """The sample's positions and two causal estimates for it. Every `every` samples once
+        the window is full: the (2, n) estimates stored for the sample h back, whose practice
+        is then in `ref`; else None."""
+        h = self.h
+        c = self.count
+        w = 2 * h + 1
+        j = c % w
+        self._q[j] = q  # twice: the window is always one contiguous slice
+        self._q[j + w] = q
+        xs = self._x[c % (h + 1)]
+        xs[0] = a
+        xs[1] = b
+        self.count = c = c + 1
+        if c < w or c % self.every:
+            return None
+        start = c % w  # the window's oldest sample
+        np.dot(self.k, self._q[start:start + w], out=self.ref)
+        return self._x[c % (h + 1)]
+
+
 class PracticeGain:
     """Per-joint regression gains of the practice's (q̇, q̈) on the causal ones; see above."""
 
@@ -97,13 +137,10 @@ class PracticeGain:
         self._sxy = np.zeros((2, n))
         self._sxx = np.zeros((2, n))
         self._syy = np.zeros((2, n))  # mean square of the practice's (qd, qdd)
-        self._tmp = np.zeros((4, n))
         self._t4 = np.zeros((4, n))
         self.ms_jerk = np.zeros(n)  # mean square of the practice's jerk ((rad/s^3)^2)
-        self._k: np.ndarray | None = None
+        self._win: PracticeWindow | None = None
         self._dt = 0.0
-        self._h = 0
-        self._count = 0
         self._evals = 0
         self._every = 1
         self._min = 1
@@ -112,40 +149,27 @@ class PracticeGain:
         """Kernels and rings for sample period dt (built once per rate, not per sample)."""
         if self._dt and abs(dt - self._dt) <= 0.25 * self._dt:
             return
-        self._k = practice_kernels(dt, self.cutoff_hz, REF_DELAY_S)  # (4, 2h + 1)
-        self._h = h = (self._k.shape[1] - 1) // 2
-        self._q = np.zeros((2 * (2 * h + 1), self.n))
-        self._x = np.zeros((h + 1, 2, self.n))
-        self._dt = dt
         self._every = max(1, round(EVERY_S / dt))
+        # the practice's (q, qd, qdd, jerk) kernels, (4, 2h + 1)
+        self._win = PracticeWindow(self.n, practice_kernels(dt, self.cutoff_hz, REF_DELAY_S),
+                                   self._every)
+        self._dt = dt
         self._min = max(1, round(MIN_S / (self._every * dt)))
         self._alpha = min(1.0, self._every * dt / TAU_S)
-        self._count = 0
 
     def restart(self) -> None:
         """No kernel spans this point (a gap, a restarted filter); the gains stay."""
-        self._count = 0
+        if self._win is not None:
+            self._win.restart()
 
     def add(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
         """The sample's positions and the filter's causal (qd, qdd) for it."""
-        if self._k is None:
+        if self._win is None:
             return
-        h = self._h
-        c = self._count
-        w = 2 * h + 1
-        j = c % w
-        self._q[j] = q  # twice: the window is always one contiguous slice
-        self._q[j + w] = q
-        xs = self._x[c % (h + 1)]
-        xs[0] = qd
-        xs[1] = qdd
-        self._count = c = c + 1
-        if c < w or c % self._every:
+        x = self._win.push(q, qd, qdd)  # the causal estimate of the sample h back
+        if x is None:
             return
-        start = c % w  # oldest sample of the window
-        ref = self._tmp
-        np.dot(self._k, self._q[start:start + w], out=ref)  # the practice's (q, qd, qdd, jerk)
-        x = self._x[c % (h + 1)]  # the causal estimate of that sample (h samples back)
+        ref = self._win.ref  # the practice's (q, qd, qdd, jerk) there
         self._evals += 1
         a = max(self._alpha, 1.0 / self._evals)
         t = self._t4

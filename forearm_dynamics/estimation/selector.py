@@ -56,7 +56,7 @@ from .base import StateEstimator
 from .butterworth import ButterworthDifference
 from .kalman import KalmanCA
 from .noise_belief import EXACT_WHITE
-from .practice_gain import practice_kernels
+from .practice_gain import PracticeWindow, practice_kernels
 
 BLEND = 0.75  # weight of the practice-gain Kalman in the blend (the rest: the Butterworth)
 PRACTICE_HZ = 6.0
@@ -92,16 +92,16 @@ class PracticeSelector(StateEstimator):
         self.noisy = np.zeros(n, bool)
         self._to_k = np.zeros(n, bool)
         self._to_b = np.zeros(n, bool)
-        self._ref = np.zeros(n)
         self._err = np.zeros((2, n))  # exponentially weighted mean square q̈ error: kalman, blend
         self._e = np.zeros((2, n))
-        self._k: np.ndarray | None = None
+        self._win: PracticeWindow | None = None
         self._dt = 0.0
         self._reset_rings()
 
     # -- state --------------------------------------------------------------------------
     def _reset_rings(self) -> None:
-        self._count = 0
+        if self._win is not None:
+            self._win.restart()
         self._evals = 0
         self._err.fill(0.0)
 
@@ -119,12 +119,10 @@ class PracticeSelector(StateEstimator):
         """Kernel and rings for sample period dt (once per rate, not per sample)."""
         if self._dt and abs(dt - self._dt) <= 0.25 * self._dt:
             return
-        self._k = practice_kernels(dt, PRACTICE_HZ, REF_HALF_S)[2]  # the practice's q̈
-        self._h = h = (len(self._k) - 1) // 2
-        self._q = np.zeros((2 * (2 * h + 1), self.n))
-        self._x = np.zeros((h + 1, 2, self.n))
-        self._dt = dt
         self._every = max(1, round(EVERY_S / dt))
+        # the practice's q̈ kernel
+        self._win = PracticeWindow(self.n, practice_kernels(dt, PRACTICE_HZ, REF_HALF_S)[2], self._every)
+        self._dt = dt
         self._alpha = min(1.0, self._every * dt / TAU_S)
         self._min = max(1, round(MIN_S / (self._every * dt)))
         self._step = min(1.0, dt / FADE_S)
@@ -164,21 +162,10 @@ class PracticeSelector(StateEstimator):
 
     def _judge(self, q: np.ndarray, qdd_k: np.ndarray, qdd_b: np.ndarray) -> None:
         """Rings, and every EVERY_S the errors against the practice and the selection."""
-        h = self._h
-        c = self._count
-        w = 2 * h + 1
-        j = c % w
-        self._q[j] = q  # twice: the window is always one contiguous slice
-        self._q[j + w] = q
-        xs = self._x[c % (h + 1)]
-        xs[0] = qdd_k
-        xs[1] = qdd_b
-        self._count = c = c + 1
-        if c < w or c % self._every:
+        x = self._win.push(q, qdd_k, qdd_b)  # the candidates' q̈ of the sample h back
+        if x is None:
             return
-        start = c % w  # the window's oldest sample
-        ref = np.dot(self._k, self._q[start:start + w], out=self._ref)  # the practice's q̈
-        x = self._x[c % (h + 1)]  # the candidates' q̈ of that sample (h samples back)
+        ref = self._win.ref  # the practice's q̈ there
         e = self._e
         np.subtract(x, ref, out=e)
         e *= e
