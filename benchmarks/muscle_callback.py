@@ -33,15 +33,17 @@ from .stats import claim_domain_arg, loadavg, percentiles
 _P = time.perf_counter_ns
 
 
-def _samples(step: int):
+def torque_payloads(movements):
+    """The torque node's joint_torques messages (CDR bytes, the same codec) for `movements`
+    (library Movements) at 1 kHz: exact q, q̇ and their inverse dynamics, stamped
+    movement id (s) + sample (ms). Shared with benchmarks/muscle_node.py's callback section."""
     from forearm_dynamics.codec.jointstate_cdr import OutputTemplate
     from forearm_dynamics.description import JOINT_NAMES
     from forearm_dynamics.dynamics import build_model
-    from forearm_dynamics.movements import movement_library
 
     arm = build_model("segmented", 50)
     tpl = OutputTemplate(JOINT_NAMES, "")
-    for mv in movement_library()[::step]:
+    for mv in movements:
         q, qd, qdd = mv.evaluate(mv.sample_times(1000.0))
         tau = arm.inverse_dynamics_batch(q, qd, qdd)
         for k in range(len(q)):
@@ -50,6 +52,12 @@ def _samples(step: int):
             np.copyto(tpl.effort, tau[k])
             tpl.pack_stamp(1000 * mv.id + k // 1000, k % 1000 * 1_000_000)
             yield tpl.payload()
+
+
+def _samples(step: int):
+    from forearm_dynamics.movements import movement_library
+
+    return torque_payloads(movement_library()[::step])
 
 
 def sections(node, datas) -> dict:

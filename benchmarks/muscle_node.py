@@ -51,6 +51,7 @@ from forearm_dynamics.muscles import StaticOptimizer, load_muscle_model
 from forearm_dynamics.processes import Child, ros_env
 
 from . import module_env
+from .muscle_callback import torque_payloads
 from .stats import claim_domain_arg, loadavg, machine_info, percentiles, write_json
 from .torque_path import Variant, _expected, _figures, _sent_by_publisher, run_variant
 
@@ -91,12 +92,8 @@ def callback_section(movements: list[int], domain: int) -> dict:
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     import rclpy
 
-    from forearm_dynamics.codec.jointstate_cdr import OutputTemplate
-    from forearm_dynamics.description import JOINT_NAMES
     from forearm_dynamics.nodes.muscle_node import MuscleNode
 
-    arm = build_model("segmented", 50)
-    tpl = OutputTemplate(JOINT_NAMES, "")  # what torque_node publishes: the same codec
     rclpy.init(args=["--ros-args", "-p", "nice:=0", "-p", "diagnostics_period:=0.0",
                      "-p", "config_topic:=''"])
     load0 = loadavg()
@@ -104,22 +101,13 @@ def callback_section(movements: list[int], domain: int) -> dict:
         node = MuscleNode()
         calls, own, pub = [], [], []
         stats = node.stats
-        for mid in movements:
-            mv = get_movement(mid)
-            q, qd, qdd = mv.evaluate(mv.sample_times(1000.0))
-            tau = arm.inverse_dynamics_batch(q, qd, qdd)
-            for k in range(len(q)):
-                np.copyto(tpl.q, q[k])
-                np.copyto(tpl.qd, qd[k])
-                np.copyto(tpl.effort, tau[k])
-                tpl.pack_stamp(1_000 * mid + k // 1000, k % 1000 * 1_000_000)
-                data = tpl.payload()
-                t0 = time.perf_counter_ns()
-                node._on_torques(data)
-                calls.append(time.perf_counter_ns() - t0)
-                i = (stats._n - 1) % stats._window
-                own.append(stats._compute_ns[i] - stats._publish_ns[i])
-                pub.append(stats._publish_ns[i])
+        for data in torque_payloads(get_movement(mid) for mid in movements):
+            t0 = time.perf_counter_ns()
+            node._on_torques(data)
+            calls.append(time.perf_counter_ns() - t0)
+            i = (stats._n - 1) % stats._window
+            own.append(stats._compute_ns[i] - stats._publish_ns[i])
+            pub.append(stats._publish_ns[i])
         out = {"samples": len(calls), "published": stats.published,
                "rejected": sum(stats.rejected.values()), "callback_us": percentiles(calls, 1e-3),
                "node_compute_minus_publish_us": percentiles(own, 1e-3),
