@@ -87,3 +87,18 @@ class CoordinateMap:
 
     def other_side(self, side: str) -> frozenset[str]:
         return frozenset(n for n, s in self.sides.items() if s != side)
+
+    def check_present(self, side: str, present, what: str, listing: list[str]) -> None:
+        """A strict map (a user's own): every entry for `side` must name something in
+        `present` (or be one of our joint names), else MotionError in one line naming the
+        entries and `what` they were looked for in (a .mot's columns, an .osim's
+        coordinates), with the first of `listing`. A default map is not strict: no check."""
+        if not self.strict:
+            return
+        present = set(present)
+        absent = [n for n in self.for_side(side) if n not in present and n not in JOINT_NAMES]
+        if absent:
+            raise MotionError(f"{self.path}: map entr{'y' if len(absent) == 1 else 'ies'} "
+                              f"{', '.join(absent[:5])}{' ...' if len(absent) > 5 else ''} name no "
+                              f"{what} (a typo? there: {', '.join(listing[:8])}"
+                              f"{' ...' if len(listing) > 8 else ''})")

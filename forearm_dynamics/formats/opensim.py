@@ -155,14 +155,8 @@ def map_motion(m: Motion, cmap: CoordinateMap, side: str = "right") -> MappedMot
     not_modelled, unknown, notes, other_arm = [], [], [], []
     entries, other = cmap.for_side(side), cmap.other_side(side)
     offsets = np.zeros(len(JOINT_NAMES))
-    if cmap.strict:
-        present = {_coordinate_of(lab)[0] for lab in m.labels}
-        absent = [name for name in entries if name not in present and name not in JOINT_NAMES]
-        if absent:
-            raise MotionError(f"{cmap.path}: map entr{'y' if len(absent) == 1 else 'ies'} "
-                              f"{', '.join(absent[:5])}{' ...' if len(absent) > 5 else ''} name no "
-                              f"column of {m.path} (a typo? its columns: {', '.join(m.labels[:8])}"
-                              f"{' ...' if len(m.labels) > 8 else ''})")
+    cmap.check_present(side, {_coordinate_of(lab)[0] for lab in m.labels}, f"column of {m.path}",
+                       list(m.labels))
     for c, label in enumerate(m.labels):
         coord, what = _coordinate_of(label)
         hit = entries.get(coord)

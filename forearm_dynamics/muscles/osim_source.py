@@ -85,13 +85,7 @@ class OsimSource:
         coords = model.getCoordinateSet()
         names = [coords.get(i).getName() for i in range(coords.getSize())]
         entries = cmap.for_side(side)
-        if cmap.strict:
-            absent = [n for n in entries if n not in names and n not in JOINT_NAMES]
-            if absent:
-                raise MotionError(f"{cmap.path}: map entr{'y' if len(absent) == 1 else 'ies'} "
-                                  f"{', '.join(absent[:5])} name no coordinate of {self.path} "
-                                  f"(its coordinates: {', '.join(names[:10])}"
-                                  f"{' ...' if len(names) > 10 else ''})")
+        cmap.check_present(side, names, f"coordinate of {self.path}", names)
         self.mapped: list[Mapped] = []
         for n in names:
             if n in entries:
