@@ -175,7 +175,6 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._Kg = np.zeros((6, 1))
         self._Sg = np.zeros(1)
         self._vel: bool | None = None
-        self._vel_seat: bool | None = None
         self._armed = self._fixed_r is not None
         self._applied = [False, False]  # a measured (position, velocity) noise is in use
         self._dt = 1e-3
