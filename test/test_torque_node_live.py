@@ -106,13 +106,14 @@ def _live_changes_during_a_1khz_replay() -> None:
         feeder.start()
         asked: list[tuple[int, dict, bool, object]] = []  # (wall ns, params, expected, future)
         for k, params, ok in CHANGES:
-            assert peer.spin_until(lambda k=k: len(stamps) >= k, 30)
+            assert peer.spin_until(lambda k=k: len(stamps) >= k, rosproc.STARTUP_S)
             req = SetParametersAtomically.Request(parameters=[
                 Parameter(n, value=x).to_parameter_msg() for n, x in params.items()])
             asked.append((time.time_ns(), params, ok, client.call_async(req)))
-        feeder.join(timeout=60)
+        feeder.join(timeout=rosproc.STARTUP_S)
         assert len(stamps) == N
-        assert peer.spin_until(lambda: len(outputs) >= N and all(f.done() for *_, f in asked), 30), \
+        assert peer.spin_until(lambda: len(outputs) >= N and all(f.done() for *_, f in asked),
+                               rosproc.STARTUP_S), \
             (len(outputs), proc.output()[-3000:])
         peer.spin_for(0.6)  # the periodic config republication
         for _, params, ok, f in asked:
