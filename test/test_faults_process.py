@@ -229,13 +229,16 @@ def test_publisher_killed_and_restarted(procs, tmp_path) -> None:
     assert received >= len(states["stamp"]) - early.sum() - 1, (received, early.sum())
     kill_gap = np.diff(states["stamp"]).max() / 1e9
     markers = bag.info.topic_counts()["/movement"]
-    th = relaxed_thresholds(tmp_path, loss_max=1)
+    # check_bag cannot tell the samples the recorder got before the node matched the restarted
+    # publisher (early, shown above: beside a second full run, 1 019 of them) from lost ones
+    excused = int(early.sum()) + 1
+    th = relaxed_thresholds(tmp_path, loss_max=excused)
     report = tmp_path / "report.json"
     chk = check_bag_cli(str(tmp_path / "run.mcap"), "--thresholds", str(th), "--json", str(report),
                         domain=domain)
     assert chk.returncode == 0, chk.stdout + chk.stderr
     rep = json.loads(report.read_text())
-    assert rep["delivery"]["lost"] <= 1
+    assert rep["delivery"]["lost"] <= excused
     complete = [m for m in rep["movements"] if m["samples"] >= m["expected"]]
     partial = [m for m in rep["movements"] if m["samples"] < m["expected"]]
     assert len(partial) <= 2  # the one cut by the kill (and the last one, stopped)
