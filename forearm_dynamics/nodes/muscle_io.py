@@ -14,7 +14,7 @@ effort, and one `take` with a combined index writes the model's (3, 20) state. T
 and three finiteness sums this replaces were ~10 % of the node's own time (measured in process:
 `python -m benchmarks.muscle_node --sections callback`).
 Output: one OutputTemplate (names = muscles) and one StdTemplate (names = joints) per frame_id,
-at most TEMPLATES of them (the oldest dropped first).
+at most std_output.CACHE of them (std_output.PerFrame, the oldest dropped first).
 """
 
 from __future__ import annotations
@@ -23,10 +23,10 @@ import numpy as np
 
 from ..codec.jointstate_cdr import OutputTemplate, StdTemplate
 from . import validation as v
+from .std_output import PerFrame
 
 NO_EFFORT = "no_effort"  # a JointState without torques (not a torque node's output)
 NO_VELOCITY = "no_velocity"
-TEMPLATES = 8  # per frame_id
 READERS = 16  # input shapes (as InputPlans keeps)
 _F64 = 8
 _PAYLOAD = 4
@@ -73,26 +73,17 @@ class StateReader:
         return view, index
 
 
-class OutputTemplates:
+class OutputTemplates(PerFrame):
     """Per frame_id: (muscle_forces template, muscle_reserves template)."""
 
     def __init__(self, muscle_names, joint_names):
         self.muscle_names = tuple(muscle_names)
         self.joint_names = tuple(joint_names)
-        self._by_frame: dict[bytes, tuple[OutputTemplate, StdTemplate]] = {}
-
-    def get(self, frame_id: bytes) -> tuple[OutputTemplate, StdTemplate]:
-        t = self._by_frame.get(frame_id)
-        if t is None:
-            if len(self._by_frame) >= TEMPLATES:
-                self._by_frame.pop(next(iter(self._by_frame)))
-            frame = frame_id.decode("utf-8")
-            t = self._by_frame[frame_id] = (OutputTemplate(self.muscle_names, frame),
-                                            StdTemplate(self.joint_names, frame))
-        return t
+        super().__init__(lambda frame: (OutputTemplate(self.muscle_names, frame),
+                                        StdTemplate(self.joint_names, frame)))
 
     def rename(self, muscle_names) -> None:
         """A rebuilt model: templates of other muscle names are dropped."""
         if tuple(muscle_names) != self.muscle_names:
             self.muscle_names = tuple(muscle_names)
-            self._by_frame.clear()
+            self.clear()

@@ -60,6 +60,7 @@ from .diagnostics import PipelineStats, diagnostic_array
 from .input_plans import GENERIC, InputPlan, InputPlans
 from .params import Params, Spec, init_node
 from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
+from .std_output import PerFrame
 
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
@@ -101,7 +102,6 @@ STREAM_SPECS = (
 )
 
 
-TEMPLATE_CACHE = 8  # output templates, one per frame_id
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,7 @@ class JointStreamNode(RealtimeNode, Node):
         self.deadlines = Deadlines(self.params.value("deadline_ms"),
                                    REASONS_TIMER if timed else REASONS_INPUT)
         self.gc_watch = GcWatch()
-        self._templates: dict[bytes, OutputTemplate] = {}
+        self._templates = PerFrame(lambda frame: OutputTemplate(self.joint_names, frame))
         self._use_template(self._template(b""))  # self.out, self.q, self.qd, self.effort
         self._shapes = InputPlans(self.names)
         self._plan: InputPlan = GENERIC  # the last message's (the steady state: one shape)
@@ -356,13 +356,7 @@ class JointStreamNode(RealtimeNode, Node):
 
     # -- templates, the generic path (rare: once per new shape or frame_id) -----------------
     def _template(self, frame_id: bytes) -> OutputTemplate:
-        t = self._templates.get(frame_id)
-        if t is None:
-            if len(self._templates) >= TEMPLATE_CACHE:
-                self._templates.pop(next(iter(self._templates)))
-            t = OutputTemplate(self.joint_names, frame_id.decode("utf-8"))
-            self._templates[frame_id] = t
-        return t
+        return self._templates.get(frame_id)
 
     def _use_template(self, t: OutputTemplate) -> None:
         """Publish from `t` from now on; q, qd, effort are its views (compute() writes them)."""
