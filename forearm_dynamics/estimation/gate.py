@@ -42,6 +42,8 @@ import math
 
 import numpy as np
 
+_max = np.maximum.reduce
+
 SPIKE_SIGMAS = 4.0
 SPIKE_FLOOR_RAD = math.radians(1.0)
 JUMP_SIGMAS = 12.0
@@ -80,8 +82,8 @@ class JumpGate:
     def check(self, e: np.ndarray, sigma: np.ndarray) -> bool:
         """Innovations e (n,) with stds sigma (n,): hold the joints beyond the gate (sets
         `held`, `pending`, `jump`); True if any joint is held."""
-        np.abs(e, out=self._abs)
-        if self._abs.max() <= SPIKE_FLOOR_RAD or not self._left:  # cheap: most samples
+        # cheap on most samples: the ufunc's reduce, not ndarray.max's Python wrapper
+        if _max(np.abs(e, out=self._abs)) <= SPIKE_FLOOR_RAD or not self._left:
             return False
         lim = self.limit(sigma, self._lim)
         np.greater(self._abs, lim, out=self.held)

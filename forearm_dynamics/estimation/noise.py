@@ -10,7 +10,8 @@ filter should smooth is the noise level where the movement's spectrum ends, whit
 
 Measure: per joint, the 5th divided difference of block means SPACING_S (50 ms) apart, on
 the real stamps: the means m_0 .. m_5 of six consecutive blocks of s = SPACING_S / dt samples
-(a moving sum, so any sample can end a block) at their mean times t_i, z = sum_i w_i m_i with
+(summed from a ring of the raw samples at each evaluation: any sample can end a block)
+at their mean times t_i, z = sum_i w_i m_i with
 w_i = 1 / prod_{j != i} (t_i - t_j). It is zero on any polynomial of order <= 4 (the
 movement, over the 0.3 s it spans), and its response |2 sin(pi f SPACING)|^10 x |boxcar|^2
 peaks at 1 / (2 SPACING) = 10 Hz, just above the 6 Hz band of the offline practice (the
@@ -102,14 +103,9 @@ class NoiseEstimator:
         self._stride = 0
         self._every = 1
         self._dt = 0.0
-        self._ring = np.zeros((0, n))  # block means (moving averages of `stride` samples)
-        self._raw = np.zeros((0, n))  # the last `stride` samples
-        self._rawt: list[float] = []
-        self._msum = np.zeros(n)
-        self._tsum = 0.0
-        self._times: list[float] = []
-        self._pick = np.zeros(ORDER + 1, np.intp)
-        self._rows = np.zeros((ORDER + 1, n))
+        self._raw = np.zeros((0, n))  # the last (ORDER + 1) x stride samples, a ring (twice)
+        self._rawt = np.zeros(0)  # their times (s)
+        self._sums = np.zeros((ORDER + 1, n))  # the blocks' sums, oldest first
         self._z = np.zeros(n)
         self._tmp = np.zeros(n)
         self._w = np.zeros(ORDER + 1)
@@ -130,23 +126,19 @@ class NoiseEstimator:
         self._dt = dt
         self._stride = max(1, round(SPACING_S / dt))
         self._every = max(1, round(EVERY_S / dt))
-        cap = ORDER * self._stride + 1
+        cap = (ORDER + 1) * self._stride  # the samples one evaluation spans
         if cap != self._cap:
             self._cap = cap
-            self._ring = np.zeros((cap, self.n))
-            self._times = [0.0] * cap
-            self._raw = np.zeros((self._stride, self.n))
-            self._rawt = [0.0] * self._stride
+            self._raw = np.zeros((2 * cap, self.n))  # each sample twice: a window is a view
+            self._rawt = np.zeros(2 * cap)
         self._count = 0
 
     def shift(self, offset: np.ndarray) -> None:
         """A discontinuity of `offset` (n,) at the newest sample: the stored samples are moved
         by it, so the difference window continues across the jump without seeing it."""
-        self._ring += offset
         self._wcount = 0
         if self._cap:
             self._raw += offset
-            self._msum += offset * min(self._count, self._stride)
         self._vcount = 0
 
     def restart(self) -> None:
@@ -189,52 +181,40 @@ class NoiseEstimator:
             self._add_velocity(t_s, qd)
 
     def _add_position(self, t_s: float, q: np.ndarray) -> None:
-        s, cap = self._stride, self._cap
+        """Keep the sample; every `_every` samples, one evaluation from the six blocks that
+        end at this sample. The block sums are taken at the evaluation from the raw ring, not
+        kept as a moving sum updated per sample: that was 4 numpy calls on every sample (and
+        a resummation against drift) for an evaluation every 20 at 1 kHz, and inside a node,
+        whose callbacks run on cold caches, each call costs 3x what it does in a loop."""
+        cap = self._cap
         c = self._count
-        hr = c % s
-        msum = self._msum
-        if c >= s:  # the moving sum over the last s samples (the block mean)
-            msum -= self._raw[hr]
-            self._tsum -= self._rawt[hr]
-        elif c == 0:
-            msum.fill(0.0)
-            self._tsum = 0.0
-        np.copyto(self._raw[hr], q)
-        self._rawt[hr] = t_s
-        msum += q
-        self._tsum += t_s
+        h = c % cap
+        raw, rawt = self._raw, self._rawt
+        raw[h] = raw[h + cap] = q
+        rawt[h] = rawt[h + cap] = t_s
         self._count = c = c + 1
-        if c % 8192 == 0:  # no rounding drift in the running sum
-            np.sum(self._raw, axis=0, out=msum)
-            self._tsum = sum(self._rawt)
-        if c < s:
-            return
-        m = c - s  # index of this block mean since the restart
-        h = m % cap
-        np.multiply(msum, 1.0 / s, out=self._ring[h])
-        self._times[h] = self._tsum / s
-        if m + 1 < cap or c % self._every:
+        if c < cap or c % self._every:
             return
         s = self._stride
-        pick = self._pick
-        for i in range(ORDER + 1):
-            pick[i] = (h - i * s) % cap
-        if self._same >= cap + s:  # uniform stamps over the window: the weights of that spacing
+        window = slice(h + 1, h + 1 + cap)  # the last cap samples, oldest first
+        sums = self._sums
+        np.sum(raw[window].reshape(ORDER + 1, s, self.n), axis=1, out=sums)
+        if self._same > cap:  # uniform stamps over the window: the weights of that spacing
             u = self._uniform
             if u is None or u[0] != self._last_d:
-                span = [-(i * s * self._last_d) * 1e-9 for i in range(ORDER + 1)]
+                span = [(i - ORDER) * s * self._last_d * 1e-9 for i in range(ORDER + 1)]
                 w, sw = divided_difference_weights(span)
                 u = self._uniform = (self._last_d, np.array(w), sw)
             _, w, sw = u
-        else:  # jittered: the weights of these times
-            wl, sw = divided_difference_weights([self._times[p] for p in pick.tolist()])
+        else:  # jittered: the weights of the blocks' mean times
+            times = rawt[window].reshape(ORDER + 1, s).mean(axis=1)
+            wl, sw = divided_difference_weights(times.tolist())
             w = self._w
             w[:] = wl
-        np.take(self._ring, pick, axis=0, out=self._rows)
         z = self._z
-        np.dot(w, self._rows, out=z)
+        np.dot(w, sums, out=z)  # s x the divided difference of the block means
         z *= z
-        z *= s / sw  # a block mean of s white samples has variance r^2 / s
+        z *= 1.0 / (s * sw)  # a block mean of s white samples has variance r^2 / s
         self.evaluations += 1
         self._accumulate(self.ms, z, self.evaluations, self._every * self._dt)
 
@@ -276,12 +256,13 @@ class NoiseEstimator:
         self.ms_w += z
 
     def _add_velocity(self, t_s: float, qd: np.ndarray) -> None:
-        c = self._vcount
-        h = c % 3
-        np.copyto(self._vring[h], qd)
-        self._vt[h] = t_s
-        self._vcount = c = c + 1
+        c = self._vcount = self._vcount + 1
         vstride = 8 if self._dt and self._dt < 2.5e-3 else 1
+        if (-c) % vstride >= 3:  # not one of the three samples the next evaluation uses
+            return
+        h = c % 3
+        self._vring[h] = qd
+        self._vt[h] = t_s
         if c < 3 or c % vstride:
             return
         t0, t1, t2 = self._vt[h], self._vt[(h - 1) % 3], self._vt[(h - 2) % 3]
