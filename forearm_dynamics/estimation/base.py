@@ -129,6 +129,11 @@ class StateEstimator(ABC):
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
         """Take the sample at t_ns; fill self.q/qd/qdd; return warm."""
 
+    def learn(self) -> None:
+        """The last sample's work that its estimate does not wait for (the Kalman's noise
+        statistics): a node calls this after publishing; otherwise the next update() (or a
+        reader of what it changes) does it first, so results never depend on the call."""
+
     def predict(self, t_ns: int) -> None:
         """Constant-acceleration extrapolation from the last update's estimate.
 

@@ -186,6 +186,12 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
         self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
         self._pg_residual = np.zeros((2, n))
+        # the last sample for the noise statistics, taken after the output (learn())
+        self._pending = False
+        self._pend_t = 0
+        self._pend_q = np.zeros(n)
+        self._pend_qd = np.zeros(n)
+        self._pend_vel = False
         self.reset()
 
     # -- public state ---------------------------------------------------------------------
@@ -235,6 +241,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
     # -- state ----------------------------------------------------------------------------
     def reset(self) -> None:
         """Forget the motion; the noise estimates stay (a stamp jump does not change the sensor)."""
+        self.learn()
         self._t_ns = None
         self._count = 0
         self._since_noise = 0.0
@@ -257,7 +264,18 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._count = 1
 
     # -- update ---------------------------------------------------------------------------
+    def learn(self) -> None:
+        """The last sample into the noise statistics (NoiseEstimator.add), deferred by
+        update() when no noise update is due: at 1 kHz that is every sample but one in 250,
+        and the add is a fifth of update()'s cost, which a node's output need not wait for."""
+        if self._pending:
+            self._pending = False
+            self.noise_estimator.add(self._pend_t, self._pend_q,
+                                     self._pend_qd if self._pend_vel else None)
+
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:
+        if self._pending:
+            self.learn()
         self.check(t_ns, q, qd)
         vel = qd is not None
         gate = self.gate
@@ -322,15 +340,22 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._count += 1
         if self._pgain is not None and not vel:
             self._pgain.add(q, x[1], x[2])
-        if held:  # the noise statistics see the prediction instead of a held joint
-            self.noise_estimator.add(t_ns, np.where(gate.held, t3[0], q), qd)
-        else:
-            self.noise_estimator.add(t_ns, q, qd)
+        # the noise statistics see the prediction instead of a held joint
         self._since_noise += dt
-        if self._since_noise >= NOISE_EVERY_S:
+        if self._since_noise >= NOISE_EVERY_S:  # a noise update: the sample goes in now
+            self.noise_estimator.add(t_ns, np.where(gate.held, t3[0], q) if held else q, qd)
             self._since_noise = 0.0
             gate.new_window()
             self._update_noise(vel, dt)
+        else:  # after the output (learn()): copies, the caller may reuse q and qd
+            self._pending = True
+            self._pend_t = t_ns
+            np.copyto(self._pend_q, q)
+            if held:
+                np.copyto(self._pend_q, t3[0], where=gate.held)
+            self._pend_vel = vel
+            if vel:
+                np.copyto(self._pend_qd, qd)
         return self._output(t_ns, self._count >= (2 if vel else 3), vel)
 
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:

@@ -53,6 +53,7 @@ class NoiseBelief:
         """Per joint (position, velocity) noise variances as measured, BEFORE the floor (the
         floor keeps the gain sane on exact input; it is a belief, not noise that is there);
         the fixed values where set, the default belief before the first estimate."""
+        self.learn()
         ne = self.noise_estimator
         r2 = self._r**2
         rv2 = self._rv**2
@@ -78,6 +79,7 @@ class NoiseBelief:
         the jump gate's rule for exact input; their 10 Hz level is the movement's own
         content, not noise. None with the noise fixed (kalman_noise_deg > 0) or before the
         first white-level estimate."""
+        self.learn()
         if self._fixed_r is not None or not self.noise_estimator.white_evaluations:
             return np.zeros(self.n, bool)
         return self.noise_estimator.white(np.empty(self.n)) <= 2.0 * self._floor

@@ -105,6 +105,10 @@ class PracticeSelector(StateEstimator):
         self._evals = 0
         self._err.fill(0.0)
 
+    def learn(self) -> None:
+        self.kalman.learn()
+        self.practice_gain.learn()
+
     def reset(self) -> None:
         for est in (self.kalman, self.practice_gain, self.butterworth):
             est.reset()
@@ -174,6 +178,7 @@ class PracticeSelector(StateEstimator):
         e -= self._err
         e *= a
         self._err += e
+        self.kalman.learn()  # its noise statistics up to this sample
         ne = self.kalman.noise_estimator
         if ne.white_evaluations:
             np.greater(ne.white(self._white), EXACT_WHITE * self._floor, out=self.noisy)

@@ -281,7 +281,9 @@ class TorqueNode(TorqueStatus, FixedRateOutput, JointStreamNode):
         """After each output: joint_torques_std for it (same header and names; σ = inf while
         the estimate warms up: its error is not what the covariance says), computed here,
         after the torques went out; and the first output of a new config states that
-        config, applied from this output's stamp."""
+        config, applied from this output's stamp. First the estimator's deferred work
+        (Estimator.learn: the Kalman's noise statistics), which the torques did not wait for."""
+        self.live.in_use.estimator.learn()
         if self._std_ready:
             ts = self.live.in_use.std
             if self.output_rate_hz > 0:  # the σ of the prediction to the output's stamp
