@@ -181,6 +181,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._smoother: FixedLagSmoother | None = None
         self._smooth_dt = 0.0
         self._first: tuple[int, np.ndarray] | None = None
+        self._restarted = False
         self._jump_exact = False
         band = v["practice_band_hz"]
         self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
@@ -255,6 +256,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             x[1].fill(0.0)
         x[2].fill(0.0)
         self._count = 1
+        self._restarted = True  # the groups are seated diffuse at the next step (noise_groups)
 
     # -- update ---------------------------------------------------------------------------
     def update(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> bool:

@@ -25,6 +25,8 @@ from . import ca_model
 
 BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
+RESTART_HORIZON_S = 1.0  # a restart's q̇, q̈ spread: what a white jerk gives them in 1 s
+SETTLED = 1e-3  # a restarted group this close to its steady posterior is seated there
 
 
 @dataclass(frozen=True)
@@ -43,7 +45,7 @@ class NoiseGroup:
 class _Group:
     """Joints that share a noise level: one covariance recursion."""
 
-    __slots__ = ("M", "P", "dt", "idx", "k", "key", "r", "rv", "still")
+    __slots__ = ("M", "P", "dt", "idx", "k", "key", "r", "rv", "settling", "still")
 
     def __init__(self, key: tuple[int, int], r: float, rv: float, idx: np.ndarray):
         self.key, self.r, self.rv, self.idx = key, r, rv, idx
@@ -52,7 +54,7 @@ class _Group:
         self.k: tuple = ()
         self.dt = -1.0
         self.still = False
-
+        self.settling = False  # seated diffuse by a restart, not yet back at steady state
 
 
 class NoiseGroups:
@@ -123,6 +125,15 @@ class NoiseGroups:
     def _covariance_step(self, dt: float, vel: bool) -> None:
         """Each group's recursion at dt; the per-joint gains and innovation stds."""
         changed = False
+        period = self.noise_estimator.period_s or dt
+        if self._restarted:  # seated diffuse: the recursion runs until it is steady again
+            self._restarted = False
+            for g in self._groups:
+                g.P = ca_model.restart_posterior(g.r, g.rv if vel else None, self.psd,
+                                                 RESTART_HORIZON_S)
+                g.still = False
+                g.settling = True
+            self._groups_version += 1
         kg, sg = self._Kg, self._Sg
         for i, g in enumerate(self._groups):
             if g.still and dt == g.dt:
@@ -131,6 +142,10 @@ class NoiseGroups:
             r2 = g.r * g.r
             k, p = ca_model.measurement_update(m, r2, g.rv * g.rv if vel else None)
             old = g.P
+            if g.settling:  # (q̇, q̈) back within SETTLED of the steady state: seated there
+                ss = ca_model.steady_posterior(period, g.r, g.rv if vel else None, self.psd)
+                if all(abs(p[i] - ss[i]) <= SETTLED * abs(ss[i]) for i in (3, 4, 5)):
+                    p, g.settling = ss, False
             g.still = dt == g.dt and all(abs(a - b) <= 1e-12 * abs(a) + 1e-300 for a, b in zip(p, old))
             g.P, g.M, g.k, g.dt = p, m, k, dt
             if vel:
