@@ -9,7 +9,12 @@ is converged ("still") from its first steps. The seat scaled from the group a jo
 (an approximation, kept while the solves were not cached) left groups converging for
 seconds: with velocities at 1 kHz, 5e-6 relative per step after 1.6 s, so on the library's
 movements the recursions never stopped (19 753 of them in 9 000 samples; update() p50 50 ->
-43 us, test_estimation_parts). `NoiseGroups` is a mixin of
+43 us, test_estimation_parts). A restart seats every group diffuse on (q̇, q̈)
+(ca_model.restart_posterior; why: kalman.py), and a group "settling" from it is seated at
+its exact steady state as soon as its (q̇, q̈) covariance is within SETTLED of it: q's own
+slow mode (velocities given, its variance falls from r^2 as the velocities integrate, 2 000-
+70 000 steps at 1 kHz to 1e-3) is not what the restart got wrong, and would keep the
+recursion running for seconds. `NoiseGroups` is a mixin of
 KalmanCA: it reads the filter's noise beliefs (_r_eff, _rv, _r_gate, _rscale2, _floor,
 _fixed_r, _fixed_rv) and writes the per-joint gains (_Kp, _Kv) and innovation stds (_sig).
 """
@@ -62,7 +67,8 @@ class NoiseGroups:
 
     @property
     def groups_version(self) -> int:
-        """Changes whenever the noise groups (levels, members, velocity mode) change."""
+        """Changes whenever the noise groups (levels, members, velocity mode) change, and at a
+        restart (the groups are seated diffuse: their gains move until they settle)."""
         return self._groups_version
 
     def noise_groups(self) -> list[NoiseGroup]:
