@@ -77,6 +77,19 @@ def steady_posterior(dt: float, r: float, r_v: float | None, psd: float) -> Cov:
     return to_tuple(m - k @ (h @ m))
 
 
+@functools.lru_cache(maxsize=64)
+def restart_posterior(r: float, r_v: float | None, psd: float, horizon_s: float) -> Cov:
+    """Where a filter restarted from one sample (q the sample, q̇ 0 or the given velocity,
+    q̈ 0) is seated: the spread the white jerk gives a state over horizon_s from a known one
+    (Q(horizon_s): what a movement under way for that long may be doing), measured once by
+    the sample (r, r_v). q̇, q̈ are then uncertain by tens of rad/s, rad/s² where the steady
+    posterior is sure of them, so the filter learns them from the samples that follow (a
+    least-squares fit at first, the steady gain once converged) instead of trusting its
+    zeros. Cached: the arguments are bin centres, as steady_posterior's."""
+    m = prior((0.0,) * 6, horizon_s, psd)
+    return measurement_update(m, r * r, None if r_v is None else r_v * r_v)[1]
+
+
 def prior(p: Cov, dt: float, psd: float) -> Cov:
     """M = F P F^T + Q at dt, in plain floats."""
     p00, p01, p02, p11, p12, p22 = p

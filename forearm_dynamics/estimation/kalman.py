@@ -14,8 +14,21 @@ group carries one covariance recursion in plain floats (ca_model.prior/measureme
 a few us), so every sample gets the exact gain of its own dt: a jittered stream, a dropped
 sample or a new noise estimate cost nothing extra. A group whose recursion has converged at
 a repeating dt skips it (a uniform stream costs the recursion only at its start). A new
-group is seated at the steady state of its noise (one Riccati solve, a few per stream), so a
-stream that starts at rest has no start-up transient. Why per joint (issue 16): one level
+group is seated at the steady state of its noise (one Riccati solve, a few per stream).
+
+Restart (the stream's first sample, reset(), the gate's discontinuity): the state starts
+from one sample (q the sample, q̇ 0 or the given velocity, q̈ 0) and every group is seated
+diffuse on (q̇, q̈) (ca_model.restart_posterior: the spread a white jerk gives them in
+1 s, measured once by the sample), so the next samples teach it q̇ and q̈ (a least-squares
+fit at first); once its (q̇, q̈) covariance is within 1e-3 of the steady state it is seated
+there and stops again (noise_groups.py: 40-150 group steps positions only, 5-20 with
+velocities, at 1 kHz). Why: seated at the steady state, the filter trusted its zeros as much
+as a converged estimate: an exact library movement, positions only, 1 kHz, reset mid-
+movement: q̈ error over the next 150 ms 121 % of its range, 5.2 % now (never restarted:
+9.1 %; test_estimation_restart.py). The first sample too: a stream that starts mid-movement
+gets the same (q̈ error over its first 150 ms, positions only: exact 63 -> 15 %, 0.5 deg
+69 -> 24 %), and one that starts from rest loses nothing (exact: 0 % both; 0.5 deg:
+37 -> 20 %, /tmp sweeps of the library's movements 3, 19, 55). Why per joint (issue 16): one level
 shared by all joints (the median, as in the first version) is the still joints' zero when a
 lab measures the arm and holds the fingers: the moving joints then trusted their noise
 (elbow torque NRMSE 18 x the causal 6 Hz Butterworth's). A held or exact joint believes the
@@ -54,8 +67,9 @@ likewise from given velocities, or fixed by kalman_velocity_noise_dps.
 Gate (gate.py): a joint whose innovation exceeds 4 sigma + 1 deg is held back one sample;
 an outlier (back at the next sample) is dropped and counted (`outliers`), a genuine sample
 is restored exactly, and one beyond 12 sigma + 0.15 rad that stays is a discontinuity: the
-filter restarts from it (q = the sample, qd = 0 or the given velocity, qdd = 0; warm after
-3 (2) samples; `discontinuities`). A withheld sample's output is the prediction, except
+filter restarts from it (q = the sample, qd = 0 or the given velocity, qdd = 0, seated
+diffuse as above; warm after 3 (2) samples; `discontinuities`). A withheld sample's output
+is the prediction, except
 beyond the discontinuity threshold on exact input (the held joints' white noise level at the
 floor; causal output): there it is the sample as a restart gives it (two movements played
 back to back jump 0.39-2.3 rad: the old posture for one sample was a pipeline error of
@@ -181,6 +195,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._smoother: FixedLagSmoother | None = None
         self._smooth_dt = 0.0
         self._first: tuple[int, np.ndarray] | None = None
+        self._restarted = False
         self._jump_exact = False
         band = v["practice_band_hz"]
         self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
@@ -240,7 +255,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
 
     # -- state ----------------------------------------------------------------------------
     def reset(self) -> None:
-        """Forget the motion; the noise estimates stay (a stamp jump does not change the sensor)."""
+        """Forget the motion; the noise estimates stay (a stamp jump does not change the sensor).
+        The next sample restarts the filter, its groups seated diffuse (module docstring)."""
         self.learn()
         self._t_ns = None
         self._count = 0
@@ -262,6 +278,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             x[1].fill(0.0)
         x[2].fill(0.0)
         self._count = 1
+        self._restarted = True  # the groups are seated diffuse at the next step (noise_groups)
 
     # -- update ---------------------------------------------------------------------------
     def learn(self) -> None:

@@ -9,7 +9,12 @@ is converged ("still") from its first steps. The seat scaled from the group a jo
 (an approximation, kept while the solves were not cached) left groups converging for
 seconds: with velocities at 1 kHz, 5e-6 relative per step after 1.6 s, so on the library's
 movements the recursions never stopped (19 753 of them in 9 000 samples; update() p50 50 ->
-43 us, test_estimation_parts). `NoiseGroups` is a mixin of
+43 us, test_estimation_parts). A restart seats every group diffuse on (q̇, q̈)
+(ca_model.restart_posterior; why: kalman.py), and a group "settling" from it is seated at
+its exact steady state as soon as its (q̇, q̈) covariance is within SETTLED of it: q's own
+slow mode (velocities given, its variance falls from r^2 as the velocities integrate, 2 000-
+70 000 steps at 1 kHz to 1e-3) is not what the restart got wrong, and would keep the
+recursion running for seconds. `NoiseGroups` is a mixin of
 KalmanCA: it reads the filter's noise beliefs (_r_eff, _rv, _r_gate, _rscale2, _floor,
 _fixed_r, _fixed_rv) and writes the per-joint gains (_Kp, _Kv) and innovation stds (_sig).
 """
@@ -25,6 +30,8 @@ from . import ca_model
 
 BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
+RESTART_HORIZON_S = 1.0  # a restart's q̇, q̈ spread: what a white jerk gives them in 1 s
+SETTLED = 1e-3  # a restarted group this close to its steady posterior is seated there
 
 
 @dataclass(frozen=True)
@@ -43,7 +50,7 @@ class NoiseGroup:
 class _Group:
     """Joints that share a noise level: one covariance recursion."""
 
-    __slots__ = ("M", "P", "dt", "idx", "k", "key", "r", "rv", "still")
+    __slots__ = ("M", "P", "dt", "idx", "k", "key", "r", "rv", "settling", "still")
 
     def __init__(self, key: tuple[int, int], r: float, rv: float, idx: np.ndarray):
         self.key, self.r, self.rv, self.idx = key, r, rv, idx
@@ -52,7 +59,7 @@ class _Group:
         self.k: tuple = ()
         self.dt = -1.0
         self.still = False
-
+        self.settling = False  # seated diffuse by a restart, not yet back at steady state
 
 
 class NoiseGroups:
@@ -60,7 +67,8 @@ class NoiseGroups:
 
     @property
     def groups_version(self) -> int:
-        """Changes whenever the noise groups (levels, members, velocity mode) change."""
+        """Changes whenever the noise groups (levels, members, velocity mode) change, and at a
+        restart (the groups are seated diffuse: their gains move until they settle)."""
         return self._groups_version
 
     def noise_groups(self) -> list[NoiseGroup]:
@@ -123,6 +131,15 @@ class NoiseGroups:
     def _covariance_step(self, dt: float, vel: bool) -> None:
         """Each group's recursion at dt; the per-joint gains and innovation stds."""
         changed = False
+        period = self.noise_estimator.period_s or dt
+        if self._restarted:  # seated diffuse: the recursion runs until it is steady again
+            self._restarted = False
+            for g in self._groups:
+                g.P = ca_model.restart_posterior(g.r, g.rv if vel else None, self.psd,
+                                                 RESTART_HORIZON_S)
+                g.still = False
+                g.settling = True
+            self._groups_version += 1
         kg, sg = self._Kg, self._Sg
         for i, g in enumerate(self._groups):
             if g.still and dt == g.dt:
@@ -131,6 +148,10 @@ class NoiseGroups:
             r2 = g.r * g.r
             k, p = ca_model.measurement_update(m, r2, g.rv * g.rv if vel else None)
             old = g.P
+            if g.settling:  # (q̇, q̈) back within SETTLED of the steady state: seated there
+                ss = ca_model.steady_posterior(period, g.r, g.rv if vel else None, self.psd)
+                if all(abs(p[i] - ss[i]) <= SETTLED * abs(ss[i]) for i in (3, 4, 5)):
+                    p, g.settling = ss, False
             g.still = dt == g.dt and all(abs(a - b) <= 1e-12 * abs(a) + 1e-300 for a, b in zip(p, old))
             g.P, g.M, g.k, g.dt = p, m, k, dt
             if vel:
