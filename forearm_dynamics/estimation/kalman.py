@@ -94,9 +94,10 @@ from .ca_model import process_noise, steady_state, transition  # noqa: F401 - pu
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
 from .noise import NoiseEstimator
-from .noise_belief import NoiseBelief
+from .noise_belief import EXACT_WHITE, NoiseBelief
 from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
 from .practice_gain import PracticeGain
+from .practice_lag import PracticeLag
 from .smoother import FixedLagSmoother
 
 NOISE_EVERY_S = 0.25
@@ -130,6 +131,12 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     "low-pass at this band + derivatives), measured per joint (practice_gain.py); "
                     "6 with kalman_min_bandwidth_hz 0 is the measured setting "
                     "(docs/estimation.md); 0 = off", lo=0.0, hi=1000.0),
+        SettingSpec("delay_practice_hz", 6.0, "Hz",
+                    "with delay_s > 0, positions only: the delayed estimate of each noisy joint is "
+                    "the offline practice's (zero-phase low-pass at this band + derivatives) from "
+                    "the samples the delay makes available and the filter's prediction of the "
+                    "rest (practice_lag.py); 0 = the model's fixed-lag smoother",
+                    lo=0.0, hi=1000.0),
         SettingSpec("delay_s", 0.0, "s",
                     "output the fixed-lag smoothed estimate of the sample this far back, "
                     "stamped with its stamp (0 = causal)", lo=0.0, hi=MAX_DELAY_S),
@@ -184,6 +191,9 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._jump_exact = False
         band = v["practice_band_hz"]
         self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
+        lag_band = v["delay_practice_hz"]
+        self._plag = PracticeLag(n, lag_band) if lag_band > 0.0 and self.delay_s > 0.0 else None
+        self._plag_use = np.zeros(n, bool)  # joints whose delayed estimate is the practice's
         self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
         self._pg_residual = np.zeros((2, n))
         self.reset()
@@ -244,6 +254,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             self._smoother.restart()
         if self._pgain is not None:
             self._pgain.restart()
+        if self._plag is not None:
+            self._plag.restart()
 
     def _start(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
         x = self._X
@@ -283,6 +295,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     self._smoother.restart()
                 if self._pgain is not None:
                     self._pgain.restart()
+                if self._plag is not None:
+                    self._plag.restart()
                 self._start(self._held_t, self._held_q, self._held_qd if vel else None)
                 dt = (t_ns - self._t_ns) * 1e-9
                 f[0, 1] = f[1, 2] = dt
@@ -295,6 +309,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     corr += self._Kv * (self._held_e[1] * genuine)
                 if self._smoother is not None:
                     self._smoother.add_to_previous(corr)
+                if self._plag is not None:
+                    self._plag.restore_last(genuine, self._held_q)
                 t3 += f @ corr
         self._dt = dt
         self._t_ns = t_ns
@@ -322,15 +338,19 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._count += 1
         if self._pgain is not None and not vel:
             self._pgain.add(q, x[1], x[2])
-        if held:  # the noise statistics see the prediction instead of a held joint
-            self.noise_estimator.add(t_ns, np.where(gate.held, t3[0], q), qd)
-        else:
-            self.noise_estimator.add(t_ns, q, qd)
+        qin = np.where(gate.held, t3[0], q) if held else q  # a held joint: the prediction
+        self.noise_estimator.add(t_ns, qin, qd)  # the noise statistics see it too
+        if self._plag is not None and not vel:
+            self._plag.push(t_ns, qin)
         self._since_noise += dt
         if self._since_noise >= NOISE_EVERY_S:
             self._since_noise = 0.0
             gate.new_window()
             self._update_noise(vel, dt)
+            if self._plag is not None and self.noise_estimator.white_evaluations:
+                # exact or held joints keep the model's smoother (practice_lag.py)
+                white = self.noise_estimator.white(self._tmp)
+                np.greater(white, EXACT_WHITE * self._floor, out=self._plag_use)
         return self._output(t_ns, self._count >= (2 if vel else 3), vel)
 
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
@@ -366,6 +386,10 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         if sm.push(t_ns, self._X, e if vel else e[:1]):
             np.copyto(self._out, sm.out)
             self.stamp_ns = sm.stamp_ns
+            pl = self._plag
+            if pl is not None and not vel and self._plag_use.any() and pl.estimate(self._X) == sm.stamp_ns:
+                use = self._plag_use
+                self._out[:, use] = pl.out[:, use]
             return warm
         self.stamp_ns = None
         return False
@@ -397,6 +421,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             cov[g.idx] = c
         self._smoother.set_gains(gains, cov)
         self._smooth_dt = dt
+        if self._plag is not None and not vel:
+            self._plag.configure(nominal, lags)  # the same (period, lags): the ring stays
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""
