@@ -88,13 +88,13 @@ import math
 
 import numpy as np
 
-from . import ca_model
+from . import ca_model, practice_lag
 from .base import SettingSpec, StateEstimator
 from .ca_model import process_noise, steady_state, transition  # noqa: F401 - public API
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
 from .noise import NoiseEstimator
-from .noise_belief import EXACT_WHITE, NoiseBelief
+from .noise_belief import COLOURED_RATIO, EXACT_WHITE, NoiseBelief
 from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
 from .practice_gain import PracticeGain
 from .practice_lag import PracticeLag
@@ -132,10 +132,11 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     "6 with kalman_min_bandwidth_hz 0 is the measured setting "
                     "(docs/estimation.md); 0 = off", lo=0.0, hi=1000.0),
         SettingSpec("delay_practice_hz", 6.0, "Hz",
-                    "with delay_s > 0, positions only: the delayed estimate of each noisy joint is "
-                    "the offline practice's (zero-phase low-pass at this band + derivatives) from "
-                    "the samples the delay makes available and the filter's prediction of the "
-                    "rest (practice_lag.py); 0 = the model's fixed-lag smoother",
+                    "with delay_s > 0, positions only: the delayed estimate of a noisy joint with "
+                    "coloured noise or a model wider than this band moves towards the offline "
+                    "practice's (zero-phase low-pass at this band + derivatives) from the samples "
+                    "the delay makes available and the filter's prediction of the rest, by a weight "
+                    "measured online (practice_lag.py); 0 = the model's fixed-lag smoother",
                     lo=0.0, hi=1000.0),
         SettingSpec("delay_s", 0.0, "s",
                     "output the fixed-lag smoothed estimate of the sample this far back, "
@@ -194,6 +195,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         lag_band = v["delay_practice_hz"]
         self._plag = PracticeLag(n, lag_band) if lag_band > 0.0 and self.delay_s > 0.0 else None
         self._plag_use = np.zeros(n, bool)  # joints whose delayed estimate is the practice's
+        self._plag_use_was = np.zeros(n, bool)
         self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
         self._pg_residual = np.zeros((2, n))
         self.reset()
@@ -348,9 +350,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             gate.new_window()
             self._update_noise(vel, dt)
             if self._plag is not None and self.noise_estimator.white_evaluations:
-                # exact or held joints keep the model's smoother (practice_lag.py)
-                white = self.noise_estimator.white(self._tmp)
-                np.greater(white, EXACT_WHITE * self._floor, out=self._plag_use)
+                self._practice_lag_joints()
         return self._output(t_ns, self._count >= (2 if vel else 3), vel)
 
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
@@ -387,9 +387,9 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             np.copyto(self._out, sm.out)
             self.stamp_ns = sm.stamp_ns
             pl = self._plag
-            if pl is not None and not vel and self._plag_use.any() and pl.estimate(self._X) == sm.stamp_ns:
-                use = self._plag_use
-                self._out[:, use] = pl.out[:, use]
+            use = self._plag_use
+            if pl is not None and not vel and use.any() and pl.estimate(self._X, sm.out) == sm.stamp_ns:
+                self._out[:, use] = pl.out[:, use]  # the practice's blend (practice_lag.py)
             return warm
         self.stamp_ns = None
         return False
@@ -423,6 +423,23 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._smooth_dt = dt
         if self._plag is not None and not vel:
             self._plag.configure(nominal, lags)  # the same (period, lags): the ring stays
+
+    def _practice_lag_joints(self) -> None:
+        """The joints whose delayed estimate blends in the practice's (practice_lag.py): noisy
+        (white level above EXACT_WHITE x the floor: not exact or held input) and either
+        filtered by the model wider than the practice's band, (psd / (r^2 dt))^(1/6) >
+        2 pi delay_practice_hz, or with coloured noise (band level > COLOURED_RATIO x white
+        level; once in, down to KEEP_RATIO). A white joint filtered narrower passes nothing
+        the practice removes, and the model, right for white noise, is kept."""
+        ne = self.noise_estimator
+        white = ne.white(self._tmp)
+        use, was = self._plag_use, self._plag_use_was
+        np.greater(white, EXACT_WHITE * self._floor, out=use)
+        dt = ne.period_s or self._dt
+        wide = self.psd / (self._r_eff**2 * dt) > (2.0 * math.pi * self._plag.cutoff_hz) ** 6
+        coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
+        use &= wide | coloured
+        np.copyto(was, use)
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""
