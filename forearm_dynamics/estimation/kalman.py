@@ -432,8 +432,11 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         level; once in, down to KEEP_RATIO). A white joint filtered narrower passes nothing
         the practice removes, and the model, right for white noise, is kept."""
         ne = self.noise_estimator
-        white = ne.white(self._tmp)
         use, was = self._plag_use, self._plag_use_was
+        if not self.noise_known(False):  # the band level is the default belief, not measured:
+            use.fill(False)  # no joint is known to be coloured or wide yet (a short exact movement)
+            return
+        white = ne.white(self._tmp)
         np.greater(white, EXACT_WHITE * self._floor, out=use)
         dt = ne.period_s or self._dt
         wide = self.psd / (self._r_eff**2 * dt) > (2.0 * math.pi * self._plag.cutoff_hz) ** 6
