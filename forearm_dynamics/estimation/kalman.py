@@ -66,6 +66,12 @@ Delay (estimator.delay_s, 0 = causal): the output is the fixed-lag smoothed esti
 sample delay_s back (round(delay_s / dt) samples at the stream's nominal period: jitter does
 not change the count, a new rate does and loses no sample), stamped with that
 sample's stamp (`stamp_ns`); nothing is output until the smoother has it (stamp_ns None).
+With positions only, a noisy joint with coloured noise or a model wider than
+delay_practice_hz (6 Hz) is moved towards the offline practice's conditional expectation
+of that sample, by a weight measured online (practice_lag.py: the model's smoother alone
+follows more content above the practice's band with more lag; with the blend more lag is
+never worse against the practice on the real corpus's tuning half). covariance() stays
+the model smoother's.
 
 Lag (causal): the model is exact for constant acceleration, so q and qd have no delay at
 low frequency; under a constant jerk j the acceleration estimate settles at qdd - j d, d
