@@ -395,7 +395,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             pl = self._plag
             use = self._plag_use
             if pl is not None and not vel and use.any() and pl.estimate(self._X, sm.out) == sm.stamp_ns:
-                self._out[:, use] = pl.out[:, use]  # the practice's blend (practice_lag.py)
+                np.copyto(self._out, pl.out, where=use)  # the practice's blend (practice_lag.py)
             return warm
         self.stamp_ns = None
         return False

@@ -62,10 +62,10 @@ from .practice_gain import practice_kernels
 HALF_S = 0.5
 #: the blend's evaluations: every EVERY_S, exponentially weighted over TAU_S, pulled towards
 #: PRIOR (the practice's estimate alone) with the weight of PRIOR_EVALS evaluations
-EVERY_S = 0.01
+EVERY_S = 0.05
 TAU_S = 6.0
 PRIOR = 1.0
-PRIOR_EVALS = 50.0
+PRIOR_EVALS = 10.0
 #: band level / white level down to which a joint that uses the practice keeps it (entry:
 #: noise_belief.COLOURED_RATIO): a ratio near the threshold does not switch every 0.25 s
 KEEP_RATIO = 1.2
