@@ -138,7 +138,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     "6 with kalman_min_bandwidth_hz 0 is the measured setting "
                     "(docs/estimation.md); 0 = off", lo=0.0, hi=1000.0),
         SettingSpec("delay_practice_hz", 6.0, "Hz",
-                    "with delay_s > 0, positions only: the delayed estimate of a noisy joint with "
+                    "with delay_s >= 0.04 s, positions only: the delayed estimate of a noisy joint with "
                     "coloured noise or a model wider than this band moves towards the offline "
                     "practice's (zero-phase low-pass at this band + derivatives) from the samples "
                     "the delay makes available and the filter's prediction of the rest, by a weight "
@@ -199,7 +199,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         band = v["practice_band_hz"]
         self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
         lag_band = v["delay_practice_hz"]
-        self._plag = PracticeLag(n, lag_band) if lag_band > 0.0 and self.delay_s > 0.0 else None
+        on = lag_band > 0.0 and self.delay_s >= practice_lag.MIN_DELAY_S
+        self._plag = PracticeLag(n, lag_band) if on else None
         self._plag_use = np.zeros(n, bool)  # joints whose delayed estimate is the practice's
         self._plag_use_was = np.zeros(n, bool)
         self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
