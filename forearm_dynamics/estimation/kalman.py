@@ -100,7 +100,7 @@ from .ca_model import process_noise, steady_state, transition  # noqa: F401 - pu
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
 from .noise import NoiseEstimator
-from .noise_belief import COLOURED_RATIO, EXACT_WHITE, NoiseBelief
+from .noise_belief import NoiseBelief
 from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
 from .practice_gain import PracticeGain
 from .practice_lag import PracticeLag
@@ -430,26 +430,6 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._smooth_dt = dt
         if self._plag is not None and not vel:
             self._plag.configure(nominal, lags)  # the same (period, lags): the ring stays
-
-    def _practice_lag_joints(self) -> None:
-        """The joints whose delayed estimate blends in the practice's (practice_lag.py): noisy
-        (white level above EXACT_WHITE x the floor: not exact or held input) and either
-        filtered by the model wider than the practice's band, (psd / (r^2 dt))^(1/6) >
-        2 pi delay_practice_hz, or with coloured noise (band level > COLOURED_RATIO x white
-        level; once in, down to KEEP_RATIO). A white joint filtered narrower passes nothing
-        the practice removes, and the model, right for white noise, is kept."""
-        ne = self.noise_estimator
-        use, was = self._plag_use, self._plag_use_was
-        if not self.noise_known(False):  # the band level is the default belief, not measured:
-            use.fill(False)  # no joint is known to be coloured or wide yet (a short exact movement)
-            return
-        white = ne.white(self._tmp)
-        np.greater(white, EXACT_WHITE * self._floor, out=use)
-        dt = ne.period_s or self._dt
-        wide = self.psd / (self._r_eff**2 * dt) > (2.0 * math.pi * self._plag.cutoff_hz) ** 6
-        coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
-        use &= wide | coloured
-        np.copyto(was, use)
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""
