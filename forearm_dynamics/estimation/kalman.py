@@ -80,6 +80,12 @@ Delay (estimator.delay_s, 0 = causal): the output is the fixed-lag smoothed esti
 sample delay_s back (round(delay_s / dt) samples at the stream's nominal period: jitter does
 not change the count, a new rate does and loses no sample), stamped with that
 sample's stamp (`stamp_ns`); nothing is output until the smoother has it (stamp_ns None).
+With positions only, a noisy joint with coloured noise or a model wider than
+delay_practice_hz (6 Hz) is moved towards the offline practice's conditional expectation
+of that sample, by a weight measured online (practice_lag.py: the model's smoother alone
+follows more content above the practice's band with more lag; with the blend more lag is
+never worse against the practice on the real corpus's tuning half). covariance() stays
+the model smoother's.
 
 Lag (causal): the model is exact for constant acceleration, so q and qd have no delay at
 low frequency; under a constant jerk j the acceleration estimate settles at qdd - j d, d
@@ -102,7 +108,7 @@ import math
 
 import numpy as np
 
-from . import ca_model
+from . import ca_model, practice_lag
 from .base import SettingSpec, StateEstimator
 from .ca_model import process_noise, steady_state, transition  # noqa: F401 - public API
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
@@ -111,6 +117,7 @@ from .noise import NoiseEstimator
 from .noise_belief import NoiseBelief
 from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
 from .practice_gain import PracticeGain
+from .practice_lag import PracticeLag
 from .smoother import FixedLagSmoother
 
 NOISE_EVERY_S = 0.25
@@ -144,6 +151,13 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     "low-pass at this band + derivatives), measured per joint (practice_gain.py); "
                     "6 with kalman_min_bandwidth_hz 0 is the measured setting "
                     "(docs/estimation.md); 0 = off", lo=0.0, hi=1000.0),
+        SettingSpec("delay_practice_hz", 6.0, "Hz",
+                    "with delay_s >= 0.04 s, positions only: the delayed estimate of a noisy joint with "
+                    "coloured noise or a model wider than this band moves towards the offline "
+                    "practice's (zero-phase low-pass at this band + derivatives) from the samples "
+                    "the delay makes available and the filter's prediction of the rest, by a weight "
+                    "measured online (practice_lag.py); 0 = the model's fixed-lag smoother",
+                    lo=0.0, hi=1000.0),
         SettingSpec("delay_s", 0.0, "s",
                     "output the fixed-lag smoothed estimate of the sample this far back, "
                     "stamped with its stamp (0 = causal)", lo=0.0, hi=MAX_DELAY_S),
@@ -199,6 +213,11 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._jump_exact = False
         band = v["practice_band_hz"]
         self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
+        lag_band = v["delay_practice_hz"]
+        on = lag_band > 0.0 and self.delay_s >= practice_lag.MIN_DELAY_S
+        self._plag = PracticeLag(n, lag_band) if on else None
+        self._plag_use = np.zeros(n, bool)  # joints whose delayed estimate is the practice's
+        self._plag_use_was = np.zeros(n, bool)
         self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
         self._pg_residual = np.zeros((2, n))
         # the last sample for the noise statistics, taken after the output (learn())
@@ -267,6 +286,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             self._smoother.restart()
         if self._pgain is not None:
             self._pgain.restart()
+        if self._plag is not None:
+            self._plag.restart()
 
     def _start(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
         x = self._X
@@ -318,6 +339,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     self._smoother.restart()
                 if self._pgain is not None:
                     self._pgain.restart()
+                if self._plag is not None:
+                    self._plag.restart()
                 self._start(self._held_t, self._held_q, self._held_qd if vel else None)
                 dt = (t_ns - self._t_ns) * 1e-9
                 f[0, 1] = f[1, 2] = dt
@@ -330,6 +353,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
                     corr += self._Kv * (self._held_e[1] * genuine)
                 if self._smoother is not None:
                     self._smoother.add_to_previous(corr)
+                if self._plag is not None:
+                    self._plag.restore_last(genuine, self._held_q)
                 t3 += f @ corr
         self._dt = dt
         self._t_ns = t_ns
@@ -357,22 +382,26 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._count += 1
         if self._pgain is not None and not vel:
             self._pgain.add(q, x[1], x[2])
-        # the noise statistics see the prediction instead of a held joint
+        qin = np.where(gate.held, t3[0], q) if held else q  # a held joint: the prediction
+        if self._plag is not None and not vel:
+            self._plag.push(t_ns, qin)
         self._since_noise += dt
-        if self._since_noise >= NOISE_EVERY_S:  # a noise update: the sample goes in now
-            self.noise_estimator.add(t_ns, np.where(gate.held, t3[0], q) if held else q, qd)
-            self._since_noise = 0.0
-            gate.new_window()
-            self._update_noise(vel, dt)
-        else:  # after the output (learn()): copies, the caller may reuse q and qd
+        due = self._since_noise >= NOISE_EVERY_S
+        if due or not self.noise_estimator.period_s:  # a noise update or no rate yet: now
+            self.noise_estimator.add(t_ns, qin, qd)  # the noise statistics see it too
+        else:  # after the output (learn()): a copy, the caller may reuse q and qd
             self._pending = True
             self._pend_t = t_ns
-            np.copyto(self._pend_q, q)
-            if held:
-                np.copyto(self._pend_q, t3[0], where=gate.held)
+            np.copyto(self._pend_q, qin)
             self._pend_vel = vel
             if vel:
                 np.copyto(self._pend_qd, qd)
+        if due:
+            self._since_noise = 0.0
+            gate.new_window()
+            self._update_noise(vel, dt)
+            if self._plag is not None and self.noise_estimator.white_evaluations:
+                self._practice_lag_joints()
         return self._output(t_ns, self._count >= (2 if vel else 3), vel)
 
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
@@ -408,6 +437,10 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         if sm.push(t_ns, self._X, e if vel else e[:1]):
             np.copyto(self._out, sm.out)
             self.stamp_ns = sm.stamp_ns
+            pl = self._plag
+            use = self._plag_use
+            if pl is not None and not vel and use.any() and pl.estimate(self._X, sm.out) == sm.stamp_ns:
+                np.copyto(self._out, pl.out, where=use)  # the practice's blend (practice_lag.py)
             return warm
         self.stamp_ns = None
         return False
@@ -439,6 +472,8 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
             cov[g.idx] = c
         self._smoother.set_gains(gains, cov)
         self._smooth_dt = dt
+        if self._plag is not None and not vel:
+            self._plag.configure(nominal, lags)  # the same (period, lags): the ring stays
 
     def drain(self) -> list[tuple[int, np.ndarray]]:
         """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""

@@ -2,7 +2,8 @@
 
 Why apart from the filter (kalman.py): the belief is where the filter meets the data
 (noise.py's estimates every NOISE_EVERY_S, the 7 Hz cap for coloured noise, issue 29's
-practice gain), and where the σ reads what the filter believes (measured_noise, noiseless,
+practice gain, which joints blend the practice into a delayed estimate: practice_lag.py),
+and where the σ reads what the filter believes (measured_noise, noiseless,
 noise_known). `NoiseBelief` is a mixin of KalmanCA; the reasons for each rule are in
 kalman.py's module docstring.
 """
@@ -12,6 +13,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from . import practice_lag
 
 EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
 COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
@@ -149,3 +152,23 @@ class NoiseBelief:
                 exact = ne.white(self._tmp) <= EXACT_WHITE * self._floor
                 self._gain[:, exact] = 1.0
                 self._pg_residual[:, exact] = 0.0
+
+    def _practice_lag_joints(self) -> None:
+        """The joints whose delayed estimate blends in the practice's (practice_lag.py): noisy
+        (white level above EXACT_WHITE x the floor: not exact or held input) and either
+        filtered by the model wider than the practice's band, (psd / (r^2 dt))^(1/6) >
+        2 pi delay_practice_hz, or with coloured noise (band level > COLOURED_RATIO x white
+        level; once in, down to KEEP_RATIO). A white joint filtered narrower passes nothing
+        the practice removes, and the model, right for white noise, is kept."""
+        ne = self.noise_estimator
+        use, was = self._plag_use, self._plag_use_was
+        if not self.noise_known(False):  # the band level is the default belief, not measured:
+            use.fill(False)  # no joint is known to be coloured or wide yet (a short exact movement)
+            return
+        white = ne.white(self._tmp)
+        np.greater(white, EXACT_WHITE * self._floor, out=use)
+        dt = ne.period_s or self._dt
+        wide = self.psd / (self._r_eff**2 * dt) > (2.0 * math.pi * self._plag.cutoff_hz) ** 6
+        coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
+        use &= wide | coloured
+        np.copyto(was, use)
