@@ -24,6 +24,12 @@ R_EFF_MAX = 4.0
 # the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
 # a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
 WHITE_ARM_EVALUATIONS = 25
+#: ... and only at sample periods up to this (s): the third difference passes a movement at
+#: f by (2 sin(pi f dt))^6, 1e-9 at 5 Hz and 1 kHz, 1.5e-5 at 200 Hz, but 1 at 30 Hz, where
+#: the "white level" is the movement's and the gate it armed held the first second of the
+#: simulated 30 Hz camera (estimation_zoo: kalman fingers NRMSE 0.077 -> 0.138, every
+#: group worse, from commit 8f13e4e on; with this limit 0.077 again)
+WHITE_ARM_MAX_PERIOD_S = 0.005
 
 
 def _summary(r: np.ndarray, floor: float) -> float:
@@ -124,7 +130,8 @@ class NoiseBelief:
             self._innovation_std()  # not the groups' recursions: they are converged (still)
             self._armed = moved = True
             self._applied[0] = True
-        elif self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS:
+        elif (self._fixed_r is None and ne.white_evaluations >= WHITE_ARM_EVALUATIONS
+              and 0.0 < ne.period_s <= WHITE_ARM_MAX_PERIOD_S):
             # no 10 Hz estimate yet (a stream whose timer stalls restarts it at every stall and
             # may never get one): the gate judges with the white level, measured in a few
             # samples, rather than stay unarmed and let every jump ring through the filter
