@@ -95,8 +95,8 @@ def sections(node, datas) -> dict:
         node.pub.publish(payload)
         node.reserves_pub.publish(reserves)
         t7 = _P()
-        r = sol.reserves
-        big = max(r.max(), -r.min())
+        r = sol.reserves.tolist()
+        big = max(max(r), -min(r))
         node._solve_ns[node._n_solve % len(node._solve_ns)] = round(sol.solve_time * 1e9)
         node._n_solve += 1
         node.stats.record(t7 - t0, 0, t7 - t6)

@@ -120,7 +120,9 @@ class StaticOptimizer:
         if flag < 1:  # a warm start gone wrong: solve once more from scratch
             self._cold()
             x, _, flag, info = self._qp.solve()
-        return np.array(x), int(flag), int(info.get("iterations", 0)), time.perf_counter() - t0
+        # x is daqp's own copy, new each solve (Model.solve returns a copy of its buffer):
+        # _finish may write into it
+        return x, int(flag), int(info.get("iterations", 0)), time.perf_counter() - t0
 
     def _finish(self, x, flag, iters, dt, R, unit, pas, tau) -> MuscleSolution:
         n = self._n
@@ -132,7 +134,8 @@ class StaticOptimizer:
         np.minimum(a, 1.0, out=a)
         r = x[n:]
         forces = a * unit
-        forces += pas
+        if self.passive:  # pas is zeros otherwise: adding it changes nothing
+            forces += pas
         res = self._res  # |R·F + r − τ|
         np.matmul(R.T, forces, out=res)
         res += r

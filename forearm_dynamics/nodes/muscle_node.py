@@ -215,12 +215,12 @@ class MuscleNode(MuscleStatus, Node):
             self.solver_failed += 1
         if sol.infeasible:
             self.infeasible += 1
-        r = sol.reserves
-        big = max(r.max(), -r.min())
+        r = sol.reserves.tolist()  # 20 floats: Python's max beats two numpy reductions
+        big = max(max(r), -min(r))
         if big > self._reserve_warn:
             self.reserve_use += 1
             if big > self._max_reserve[0]:
-                self._max_reserve = (float(big), JOINT_NAMES[int(np.abs(r).argmax())])
+                self._max_reserve = (float(big), JOINT_NAMES[int(np.abs(sol.reserves).argmax())])
         self._solve_ns[self._n_solve % len(self._solve_ns)] = round(sol.solve_time * 1e9)
         self._n_solve += 1
         st.published += 1
