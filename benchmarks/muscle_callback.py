@@ -77,7 +77,7 @@ def sections(node, datas) -> dict:
         node._reader.read(plan)
         sec, nsec = node._stamp(data, 4)
         t2 = _P()
-        ok = math.isfinite(node._state.sum())
+        ok = math.isfinite(node._state_flat.dot(node._ones))
         t3 = _P()
         b = node.bundle
         R, L, V = b.model.geometry(node.q, node.qd, node._geo)

@@ -129,6 +129,9 @@ class MuscleNode(MuscleStatus, Node):
         self._reader = StateReader(s.input_topic, len(JOINT_NAMES))
         self._state = self._reader.state
         self.q, self.qd, self.tau = self._state  # views: the reader writes them
+        # finiteness of all 60 numbers as one BLAS dot with ones (a NaN or inf makes the sum
+        # non-finite, as ndarray.sum() did): 1.3 vs 3.0 µs, the ufunc reduction's set-up
+        self._state_flat, self._ones = self._state.reshape(-1), np.ones(self._state.size)
         self._outputs = OutputTemplates(self.bundle.model.names, JOINT_NAMES)
         self._stamp = STAMP.unpack_from
         self._geo = self.bundle.model.geometry_outputs()  # R, L, V: written per sample
@@ -179,7 +182,7 @@ class MuscleNode(MuscleStatus, Node):
                 if not (sec or nsec) or nsec >= 1_000_000_000 or sec < 0:
                     raise v.bad_stamp(sec, nsec)
                 frame_id = plan.layout.frame_id
-            if not math.isfinite(self._state.sum()):
+            if not math.isfinite(self._state_flat.dot(self._ones)):
                 raise self._nonfinite()
         except v.Rejection as r:
             st.rejected[r.reason] += 1
