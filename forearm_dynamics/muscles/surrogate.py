@@ -121,6 +121,19 @@ class Surrogate:
                                     mono[sl]))
         n = self.n
         self._vals_l, self._vals_r = self._vals[:n], self._vals[n:]
+        # the same rows, laid out as [L (n); R (n, 20) flat] with empty rows for the joints a
+        # muscle does not cross: the product then writes new_outputs()' arrays directly
+        # (no scatter, no copy; each row's terms in the same order: the same sums to the bit)
+        c = self.coef
+        target = np.r_[np.arange(n), n + self.pair_flat]  # coef row -> full row
+        lengths = np.zeros(n + n * len(JOINT_NAMES), np.int64)
+        lengths[target] = np.diff(c.indptr)
+        order = np.argsort(target)  # coef rows in full-row order
+        take = np.concatenate([np.arange(c.indptr[r], c.indptr[r + 1]) for r in order]) \
+            if c.nnz else np.zeros(0, np.int64)
+        self._full = (len(lengths), c.shape[1], np.r_[0, np.cumsum(lengths)].astype(c.indptr.dtype),
+                      c.indices[take], c.data[take])
+        self._direct: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     @classmethod
     def from_doc(cls, joints: dict, spans: Sequence[Sequence[str]], rows: Sequence[dict], *,
@@ -237,8 +250,15 @@ class Surrogate:
         return self._mono
 
     def new_outputs(self) -> tuple[np.ndarray, np.ndarray]:
-        """(R (n, 20), L (n,)) for evaluate(q, out=...): R's unspanned entries stay 0."""
-        return np.zeros((self.n, len(JOINT_NAMES))), np.zeros(self.n)
+        """(R (n, 20), L (n,)) for evaluate(q, out=...): R's unspanned entries stay 0. Both
+        are views of one buffer the sparse product writes in place (the last 8 pairs made
+        are known to evaluate; any other arrays are filled by a scatter and a copy)."""
+        buf = np.zeros(self._full[0])
+        R, L = buf[self.n:].reshape(self.n, len(JOINT_NAMES)), buf[: self.n]
+        if len(self._direct) >= 8:
+            self._direct.pop(next(iter(self._direct)))
+        self._direct[id(R)] = (R, L, buf)
+        return R, L
 
     def evaluate(self, q: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -250,6 +270,13 @@ class Surrogate:
         np.minimum(xe, 1.0, out=xe)
         np.maximum(xe, -1.0, out=xe)
         mono = self._monomials_one(xe)
+        direct = self._direct.get(id(out[0])) if out is not None and _csr_matvec is not None \
+            else None
+        if direct is not None and direct[0] is out[0] and direct[1] is out[1]:
+            buf = direct[2]
+            buf.fill(0.0)  # csr_matvec adds to it, as scipy's own product starts from zeros
+            _csr_matvec(*self._full, mono, buf)
+            return out
         c = self.coef
         if _csr_matvec is None:
             vals = c @ mono
