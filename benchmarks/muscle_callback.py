@@ -67,8 +67,9 @@ def _samples(step: int):
 class Pacer:
     """Sample k starts no earlier than k / rate after the first (rate 0: back to back). A node
     at 1 kHz sleeps between samples and other processes run: its caches and the CPU's state are
-    colder than in a back-to-back loop (the geometry + QP cost ~35 % more paced, same process
-    and load), so the figure for a 1 kHz callback is the paced one."""
+    colder than in a back-to-back loop (the whole callback cost 1.2-2.2x its back-to-back
+    figure in this benchmark's runs on 2026-12-03, every step slower, at loads 2-4.7), so the
+    figure for a 1 kHz callback is the paced one."""
 
     def __init__(self, rate: float):
         self.period = int(1e9 / rate) if rate > 0 else 0
