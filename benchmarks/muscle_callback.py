@@ -1,6 +1,6 @@
 """Where muscle_node's joint_torques callback spends its time, in process (issue 31).
 
-    python -m benchmarks.muscle_callback [--movements-step 13] [--before DIR] > out.json
+    python -m benchmarks.muscle_callback [--movements-step 13] [--before DIR] [--rate 1000] > out.json
 
 A real MuscleNode (rclpy; its publishers have no reader) and the torque node's CDR bytes for
 the library's movements (every `--movements-step`-th). Per sample, the callback's steps are
@@ -14,6 +14,10 @@ mirrored here.
 tar -x -C DIR`), imported as a second package; its MuscleNode and this one are fed the same
 bytes alternately, sample by sample (same CPU conditions), and the paired difference of their
 whole callbacks is reported: the only fair A/B on a machine whose speed drifts between runs.
+
+--rate HZ (default 1000; 0 = off): the steps and the A/B are run again with the samples paced
+at HZ (`sections_paced_us_p50`, `interleaved_paced`), as the node receives them: between two
+samples the process sleeps and the caches cool, which the back-to-back figures do not see.
 """
 
 from __future__ import annotations
@@ -60,14 +64,36 @@ def _samples(step: int):
     return torque_payloads(movement_library()[::step])
 
 
-def sections(node, datas) -> dict:
+class Pacer:
+    """Sample k starts no earlier than k / rate after the first (rate 0: back to back). A node
+    at 1 kHz sleeps between samples and other processes run: its caches and the CPU's state are
+    colder than in a back-to-back loop (the whole callback cost 1.2-2.2x its back-to-back
+    figure in this benchmark's runs on 2026-12-03, every step slower, at loads 2-4.7), so the
+    figure for a 1 kHz callback is the paced one."""
+
+    def __init__(self, rate: float):
+        self.period = int(1e9 / rate) if rate > 0 else 0
+        self.next = None
+
+    def wait(self) -> None:
+        if not self.period:
+            return
+        now = _P()
+        self.next = now if self.next is None else self.next + self.period
+        if self.next > now:
+            time.sleep((self.next - now) / 1e9)
+
+
+def sections(node, datas, rate: float = 0.0) -> dict:
     """The callback's steps, timed one by one (see the module docstring)."""
     t: dict[str, list[int]] = {}
+    pacer = Pacer(rate)
 
     def add(key, dt):
         t.setdefault(key, []).append(dt)
 
     for data in datas:
+        pacer.wait()
         t0 = _P()
         plan = node._plan
         if plan.layout is None or not plan.layout.matches(data):
@@ -77,7 +103,7 @@ def sections(node, datas) -> dict:
         node._reader.read(plan)
         sec, nsec = node._stamp(data, 4)
         t2 = _P()
-        ok = math.isfinite(node._state.sum())
+        ok = math.isfinite(node._state_flat.dot(node._ones))
         t3 = _P()
         b = node.bundle
         R, L, V = b.model.geometry(node.q, node.qd, node._geo)
@@ -95,8 +121,8 @@ def sections(node, datas) -> dict:
         node.pub.publish(payload)
         node.reserves_pub.publish(reserves)
         t7 = _P()
-        r = sol.reserves
-        big = max(r.max(), -r.min())
+        r = sol.reserves.tolist()
+        big = max(max(r), -min(r))
         node._solve_ns[node._n_solve % len(node._solve_ns)] = round(sol.solve_time * 1e9)
         node._n_solve += 1
         node.stats.record(t7 - t0, 0, t7 - t6)
@@ -111,6 +137,24 @@ def sections(node, datas) -> dict:
             add(key, z - a)
         add("qp_solve_time", sol.solve_time * 1e9)
     return {k: round(float(np.percentile(v, 50)) / 1e3, 2) for k, v in t.items()}
+
+
+def _interleaved(nodes: dict, step: int, rate: float) -> dict:
+    """The two nodes fed the same bytes alternately (which goes first alternates too), each
+    whole callback timed; the paired difference before - this."""
+    calls: dict[str, list[int]] = {k: [] for k in nodes}
+    pacer = Pacer(rate)
+    for k, data in enumerate(_samples(step)):
+        for name in (("this", "before") if k % 2 else ("before", "this")):
+            pacer.wait()
+            t0 = _P()
+            nodes[name]._on_torques(data)
+            calls[name].append(_P() - t0)
+    d = np.sort(np.array(calls["before"]) - np.array(calls["this"]))
+    cut = len(d) // 10
+    return {**{f"{k}_callback_us": percentiles(v, 1e-3) for k, v in calls.items()},
+            "before_minus_this_us_p50": float(np.median(d)) / 1e3,
+            "before_minus_this_us_mean_middle_80pc": float(d[cut:len(d) - cut].mean()) / 1e3}
 
 
 def _load_other(path: str):
@@ -128,6 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="benchmarks.muscle_callback", description=__doc__.split("\n\n")[0])
     ap.add_argument("--movements-step", type=int, default=13)
     ap.add_argument("--before", help="directory holding another version's forearm_dynamics")
+    ap.add_argument("--rate", type=float, default=1000.0,
+                    help="also run paced at this rate (Hz; 0: back to back only)")
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID") or 0) or 77)
     args = ap.parse_args(argv)
     lease = claim_domain_arg(ap, args.domain, "benchmarks.muscle_callback")
@@ -144,20 +190,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         node = MuscleNode("muscle_sections")
         out["sections_us_p50"] = sections(node, _samples(args.movements_step))
+        if args.rate > 0:
+            out["rate_hz"] = args.rate
+            out["sections_paced_us_p50"] = sections(node, _samples(args.movements_step), args.rate)
         if other is not None:
             nodes = {"this": MuscleNode("muscle_this"), "before": other.MuscleNode("muscle_before")}
-            calls: dict[str, list[int]] = {k: [] for k in nodes}
-            for k, data in enumerate(_samples(args.movements_step)):
-                for name in (("this", "before") if k % 2 else ("before", "this")):
-                    t0 = _P()
-                    nodes[name]._on_torques(data)
-                    calls[name].append(_P() - t0)
-            d = np.sort(np.array(calls["before"]) - np.array(calls["this"]))
-            cut = len(d) // 10
-            out["interleaved"] = {
-                **{f"{k}_callback_us": percentiles(v, 1e-3) for k, v in calls.items()},
-                "before_minus_this_us_p50": float(np.median(d)) / 1e3,
-                "before_minus_this_us_mean_middle_80pc": float(d[cut:len(d) - cut].mean()) / 1e3}
+            out["interleaved"] = _interleaved(nodes, args.movements_step, 0.0)
+            if args.rate > 0:
+                out["interleaved_paced"] = _interleaved(nodes, args.movements_step, args.rate)
     finally:
         rclpy.try_shutdown()
     out["loadavg_end"] = loadavg()

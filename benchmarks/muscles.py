@@ -38,6 +38,7 @@ def run(movements: list[int] | None, rate: float) -> dict:
     arm = build_model("segmented")
     so = StaticOptimizer(mm)
     forces = UnitForces(mm.params())
+    geo = mm.geometry_outputs()
     lib = movement_library()
     chosen = [m for m in lib if movements is None or m.id in movements]
     clock = time.perf_counter_ns
@@ -52,7 +53,7 @@ def run(movements: list[int] | None, rate: float) -> dict:
             t0 = clock()
             tau = arm.inverse_dynamics(q[k], qd[k], qdd[k])
             t1 = clock()
-            R, L, V = mm.geometry(q[k], qd[k])
+            R, L, V = mm.geometry(q[k], qd[k], geo)  # the node's path: into arrays made once
             t2 = clock()
             forces(L, V)
             t3 = clock()

@@ -108,7 +108,8 @@ class MuscleModel:
         return R, L, V
 
     def geometry_outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Arrays for geometry(q, qd, out=...): (R (n, 20), L (n,), V (n,))."""
+        """Arrays for geometry(q, qd, out=...): (R (n, 20), L (n,), V (n,)); R and L views
+        of one buffer the surrogate's product writes in place (Surrogate.new_outputs)."""
         return (*self.surrogate.new_outputs(), np.zeros(self.n))
 
     def config(self) -> dict[str, Any]:

@@ -129,6 +129,9 @@ class MuscleNode(MuscleStatus, Node):
         self._reader = StateReader(s.input_topic, len(JOINT_NAMES))
         self._state = self._reader.state
         self.q, self.qd, self.tau = self._state  # views: the reader writes them
+        # finiteness of all 60 numbers as one BLAS dot with ones (a NaN or inf makes the sum
+        # non-finite, as ndarray.sum() did): 1.3 vs 3.0 µs, the ufunc reduction's set-up
+        self._state_flat, self._ones = self._state.reshape(-1), np.ones(self._state.size)
         self._outputs = OutputTemplates(self.bundle.model.names, JOINT_NAMES)
         self._stamp = STAMP.unpack_from
         self._geo = self.bundle.model.geometry_outputs()  # R, L, V: written per sample
@@ -179,7 +182,7 @@ class MuscleNode(MuscleStatus, Node):
                 if not (sec or nsec) or nsec >= 1_000_000_000 or sec < 0:
                     raise v.bad_stamp(sec, nsec)
                 frame_id = plan.layout.frame_id
-            if not math.isfinite(self._state.sum()):
+            if not math.isfinite(self._state_flat.dot(self._ones)):
                 raise self._nonfinite()
         except v.Rejection as r:
             st.rejected[r.reason] += 1
@@ -215,12 +218,12 @@ class MuscleNode(MuscleStatus, Node):
             self.solver_failed += 1
         if sol.infeasible:
             self.infeasible += 1
-        r = sol.reserves
-        big = max(r.max(), -r.min())
+        r = sol.reserves.tolist()  # 20 floats: Python's max beats two numpy reductions
+        big = max(max(r), -min(r))
         if big > self._reserve_warn:
             self.reserve_use += 1
             if big > self._max_reserve[0]:
-                self._max_reserve = (float(big), JOINT_NAMES[int(np.abs(r).argmax())])
+                self._max_reserve = (float(big), JOINT_NAMES[int(np.abs(sol.reserves).argmax())])
         self._solve_ns[self._n_solve % len(self._solve_ns)] = round(sol.solve_time * 1e9)
         self._n_solve += 1
         st.published += 1
