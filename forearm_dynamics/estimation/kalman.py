@@ -76,16 +76,8 @@ back to back jump 0.39-2.3 rad: the old posture for one sample was a pipeline er
 995 % on a DOF that barely moves in the next movement). A noisy sensor's sample beyond it
 (a 20 deg marker swap) still outputs the prediction.
 
-Delay (estimator.delay_s, 0 = causal): the output is the fixed-lag smoothed estimate of the
-sample delay_s back (round(delay_s / dt) samples at the stream's nominal period: jitter does
-not change the count, a new rate does and loses no sample), stamped with that
-sample's stamp (`stamp_ns`); nothing is output until the smoother has it (stamp_ns None).
-With positions only, a noisy joint with coloured noise or a model wider than
-delay_practice_hz (6 Hz) is moved towards the offline practice's conditional expectation
-of that sample, by a weight measured online (practice_lag.py: the model's smoother alone
-follows more content above the practice's band with more lag; with the blend more lag is
-never worse against the practice on the real corpus's tuning half). covariance() stays
-the model smoother's.
+Delay (estimator.delay_s, 0 = causal): the fixed-lag smoothed estimate of the sample delay_s
+back, stamped with its stamp (delayed_output.py).
 
 Lag (causal): the model is exact for constant acceleration, so q and qd have no delay at
 low frequency; under a constant jerk j the acceleration estimate settles at qdd - j d, d
@@ -111,6 +103,7 @@ import numpy as np
 from . import ca_model, practice_lag
 from .base import SettingSpec, StateEstimator
 from .ca_model import process_noise, steady_state, transition  # noqa: F401 - public API
+from .delayed_output import DelayedOutput
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
 from .noise import NoiseEstimator
@@ -118,13 +111,12 @@ from .noise_belief import NoiseBelief
 from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
 from .practice_gain import PracticeGain
 from .practice_lag import PracticeLag
-from .smoother import FixedLagSmoother
 
 NOISE_EVERY_S = 0.25
 MAX_DELAY_S = 0.2
 
 
-class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
+class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
     """White-jerk Kalman filter, per-joint noise; see the module docstring."""
 
     name = "kalman"
@@ -206,7 +198,7 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         self._armed = self._fixed_r is not None
         self._applied = [False, False]  # a measured (position, velocity) noise is in use
         self._dt = 1e-3
-        self._smoother: FixedLagSmoother | None = None
+        self._smoother = None  # FixedLagSmoother with a delay (delayed_output.py)
         self._smooth_dt = 0.0
         self._first: tuple[int, np.ndarray] | None = None
         self._restarted = False
@@ -405,79 +397,24 @@ class KalmanCA(NoiseGroups, NoiseBelief, StateEstimator):
         return self._output(t_ns, self._count >= (2 if vel else 3), vel)
 
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
-        if self.delay_s <= 0.0:
-            np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
-            if self._pgain is not None and not vel:
-                self._out[1:] *= self._gain
-            self.stamp_ns = t_ns
-            if self.gate.pending and self.gate.jump and self._jump_exact:
-                # held beyond the discontinuity threshold: most likely a jump (two movements
-                # back to back), so this one output is the sample as a restart would give it
-                # (q = the sample, qd = 0 or given, qdd = 0); the state waits for the next
-                self.q[:] = self._held_q
-                if vel:
-                    self.qd[:] = self._held_qd
-                else:
-                    self.qd.fill(0.0)
-                self.qdd.fill(0.0)
-                return False
-            return warm
-        sm = self._smoother
-        if sm is None or not self._smooth_dt:
-            if self._count < 2:  # no period known yet: the first sample waits for the gains
-                self._first = (t_ns, self._X.copy())
-                self.stamp_ns = None
-                return False
-            self._configure_smoother(self._dt, vel)
-            first, self._first = self._first, None
-            if first is not None:  # the first sample (of the stream or after a reset) goes in now
-                self._smoother.push(first[0], first[1], np.zeros((2 if vel else 1, self.n)))
-            sm = self._smoother
-        e = self._E if self._count >= 2 else self._E * 0.0
-        if sm.push(t_ns, self._X, e if vel else e[:1]):
-            np.copyto(self._out, sm.out)
-            self.stamp_ns = sm.stamp_ns
-            pl = self._plag
-            use = self._plag_use
-            if pl is not None and not vel and use.any() and pl.estimate(self._X, sm.out) == sm.stamp_ns:
-                np.copyto(self._out, pl.out, where=use)  # the practice's blend (practice_lag.py)
-            return warm
-        self.stamp_ns = None
-        return False
-
-    def _configure_smoother(self, dt: float, vel: bool) -> None:
-        """Lag gains per joint from each group's converged filter at the stream's nominal
-        period (the noise estimator's; dt before it has one).
-
-        The nominal period, not the last step's: on jittered stamps the last dt moved the lag
-        count (round(delay_s / dt): 0.05 s is 36-83 samples at 0.6-1.4 ms) at every regroup,
-        and a new smoother dropped what the old one held (1 732 of 20 000 samples never
-        output; test_estimation_parts). A real rate change makes a new smoother that first
-        outputs what the old one held. The gains are ca_model.lag_gains' cache of the
-        steady state per (period, noise bin): a regroup costs a lookup per group, not a
-        Riccati solve and `lags` matrix products (2.7 ms median at 1 kHz, on the callback)."""
-        nominal = self.noise_estimator.period_s or dt
-        lags = max(1, round(self.delay_s / nominal))
-        old = self._smoother
-        if old is None or old.lags != lags:
-            self._smoother = FixedLagSmoother(self.n, lags)
-            if old is not None:
-                self._smoother.take_over(old)
-        m = 2 if vel else 1
-        gains = np.zeros((lags + 1, 3, m, self.n))
-        cov = np.zeros((self.n, 3, 3))
-        for g in self._groups:
-            k, c = ca_model.lag_gains(nominal, g.r, g.rv if vel else None, self.psd, lags)
-            gains[:, :, :, g.idx] = k[:, :, :, None]
-            cov[g.idx] = c
-        self._smoother.set_gains(gains, cov)
-        self._smooth_dt = dt
-        if self._plag is not None and not vel:
-            self._plag.configure(nominal, lags)  # the same (period, lags): the ring stays
-
-    def drain(self) -> list[tuple[int, np.ndarray]]:
-        """With a delay: the samples not yet output (end of a recording), [(stamp, (3, n))]."""
-        return [] if self._smoother is None else self._smoother.drain()
+        if self.delay_s > 0.0:
+            return self._output_delayed(t_ns, warm, vel)
+        np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
+        if self._pgain is not None and not vel:
+            self._out[1:] *= self._gain
+        self.stamp_ns = t_ns
+        if self.gate.pending and self.gate.jump and self._jump_exact:
+            # held beyond the discontinuity threshold: most likely a jump (two movements
+            # back to back), so this one output is the sample as a restart would give it
+            # (q = the sample, qd = 0 or given, qdd = 0); the state waits for the next
+            self.q[:] = self._held_q
+            if vel:
+                self.qd[:] = self._held_qd
+            else:
+                self.qd.fill(0.0)
+            self.qdd.fill(0.0)
+            return False
+        return warm
 
     # -- description ------------------------------------------------------------------------
     def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
