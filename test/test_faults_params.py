@@ -158,6 +158,7 @@ INVALID = [
     ("torque_node", ["estimator.kalman_min_bandwidth_hz:=.nan"], "estimator.kalman_min_bandwidth_hz"),
     ("torque_node", ["estimator.practice_band_hz:=-1.0"], "estimator.practice_band_hz"),
     ("torque_node", ["estimator.practice_band_hz:=.nan"], "estimator.practice_band_hz"),
+    ("torque_node", ["estimator.delay_practice_hz:=-1.0"], "estimator.delay_practice_hz"),
     ("torque_node", ["estimator.delay_s:=0.5"], "estimator.delay_s"),  # beyond 0.2 s
     ("torque_node", ["estimator.delay_s:=-0.01"], "estimator.delay_s"),
     ("trajectory_publisher", ["movements:=[1.5]"], "movements"),

@@ -241,7 +241,14 @@ def test_publisher_killed_and_restarted(procs, tmp_path) -> None:
     assert rep["delivery"]["lost"] <= excused
     complete = [m for m in rep["movements"] if m["samples"] >= m["expected"]]
     partial = [m for m in rep["movements"] if m["samples"] < m["expected"]]
-    assert len(partial) <= 2  # the one cut by the kill (and the last one, stopped)
+    # the one cut by the kill and the last one, stopped; and any the node never had whole
+    # because it matched a publisher late (early, above: beside a second full run at load 15
+    # the first movement, all 1 500 samples, went by before the node matched)
+    t0 = [m["t0_ns"] for m in rep["movements"]] + [2**63]
+    early_ns = lost[early]
+    by_discovery = [m for i, m in enumerate(rep["movements"]) if m["samples"] < m["expected"]
+                    and ((early_ns >= t0[i]) & (early_ns < t0[i + 1])).any()]
+    assert len(partial) - len(by_discovery) <= 2, (partial, by_discovery)
     for m in rep["movements"]:  # a cut movement too: NRMSE scaled by the whole movement
         assert m["pipeline_worst"]["nrmse"] <= 0.02 and m["state_error_rad"] <= 1e-6, m
     print(f"publisher SIGKILL + restart: {len(states['stamp'])} joint_states, "
