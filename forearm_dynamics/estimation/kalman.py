@@ -274,12 +274,14 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
         self._since_noise = 0.0
         self.gate.clear()
         self.noise_estimator.restart()
-        if self._smoother is not None:
-            self._smoother.restart()
-        if self._pgain is not None:
-            self._pgain.restart()
-        if self._plag is not None:
-            self._plag.restart()
+        self._restart_windows()
+
+    def _restart_windows(self) -> None:
+        """The windows over past samples that no restart may span: the smoother's, the
+        practice gain's and the practice lag's (reset() and the gate's discontinuity)."""
+        for part in (self._smoother, self._pgain, self._plag):
+            if part is not None:
+                part.restart()
 
     def _start(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
         x = self._X
@@ -327,12 +329,7 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
                 gate.jump = False
                 # the noise window continues across the jump, moved by it (held joints)
                 self.noise_estimator.shift(self._held_e[0])
-                if self._smoother is not None:
-                    self._smoother.restart()
-                if self._pgain is not None:
-                    self._pgain.restart()
-                if self._plag is not None:
-                    self._plag.restart()
+                self._restart_windows()
                 self._start(self._held_t, self._held_q, self._held_qd if vel else None)
                 dt = (t_ns - self._t_ns) * 1e-9
                 f[0, 1] = f[1, 2] = dt
