@@ -99,7 +99,6 @@ class StaticOptimizer:
         # the bounds' entries are not soft (sense 0): daqp ignores them
         self._rho = np.concatenate([np.ones(n), r_opt ** 2 / 2.0])
         self._qp = None
-        self._A_muscles = self._A
         self._rhs_u, self._rhs_l = self._bu[n:], self._bl[n:]
         self._res = np.empty(nj)  # the residual's scratch
         self._saturated = 1.0 - self.saturation_tol
@@ -110,7 +109,7 @@ class StaticOptimizer:
 
     def _problem(self, R: np.ndarray, L: np.ndarray, V: np.ndarray, tau: np.ndarray):
         unit, pas = self._unit(L, V)
-        np.multiply(R.T, unit, out=self._A_muscles)  # A[j, i] = R[i, j] · unit[i]
+        np.multiply(R.T, unit, out=self._A)  # A[j, i] = R[i, j] · unit[i]
         rhs = tau - R.T @ pas if self.passive else tau
         self._rhs_u[:] = rhs
         self._rhs_l[:] = rhs
