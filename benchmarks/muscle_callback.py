@@ -108,22 +108,21 @@ def sections(node, datas, rate: float = 0.0) -> dict:
         b = node.bundle
         R, L, V = b.model.geometry(node.q, node.qd, node._geo)
         t4 = _P()
-        sol = b.optimizer.solve_geometry(R, L, V, node.tau)
-        t5 = _P()
         out, res = node._outputs.get(plan.layout.frame_id)
-        np.copyto(out.q, sol.activations)
-        np.copyto(out.effort, sol.forces)
+        _flag, _infeasible, solve_s = b.optimizer.solve_into(R, L, V, node.tau, out.q,
+                                                             out.effort, res.effort)
+        t5 = _P()
         np.copyto(out.qd, V)
         out.pack_stamp(sec, nsec)
         payload = out.payload()
-        reserves = res.fill(sec, nsec, sol.reserves)
+        reserves = res.stamped(sec, nsec)
         t6 = _P()
         node.pub.publish(payload)
         node.reserves_pub.publish(reserves)
         t7 = _P()
-        r = sol.reserves.tolist()
+        r = res.effort.tolist()
         big = max(max(r), -min(r))
-        node._solve_ns[node._n_solve % len(node._solve_ns)] = round(sol.solve_time * 1e9)
+        node._solve_ns[node._n_solve % len(node._solve_ns)] = round(solve_s * 1e9)
         node._n_solve += 1
         node.stats.record(t7 - t0, 0, t7 - t6)
         t8 = _P()
@@ -135,7 +134,7 @@ def sections(node, datas, rate: float = 0.0) -> dict:
                           ("publish_both_no_reader", t6, t7), ("bookkeeping", t7, t8),
                           ("total", t0, t8)):
             add(key, z - a)
-        add("qp_solve_time", sol.solve_time * 1e9)
+        add("qp_solve_time", solve_s * 1e9)
     return {k: round(float(np.percentile(v, 50)) / 1e3, 2) for k, v in t.items()}
 
 

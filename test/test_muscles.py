@@ -410,15 +410,23 @@ def test_daqp_agrees_with_scipy_bounded_least_squares(mm, arm):
         np.testing.assert_allclose(s.reserves, tau[k] - A @ ref.x, atol=1e-5)
 
 
-def test_the_nodes_buffered_geometry_and_solve_equal_the_allocating_path(mm, arm):
-    """muscle_node writes the geometry into arrays made once (geometry(out=)) and the optimizer
-    reuses its scratch: the numbers must be the allocating path's, bit for bit, sample after
-    sample (a buffer read before its sample is written, or a stale entry, would show here)."""
+@pytest.mark.parametrize("passive", [False, True])
+def test_the_nodes_buffered_geometry_and_solve_equal_the_allocating_path(mm, arm, passive):
+    """muscle_node writes the geometry into arrays made once (geometry(out=)), the optimizer
+    reuses its scratch and solve_into writes the results into the output message's bytes: the
+    numbers must be the allocating path's, bit for bit, sample after sample (a buffer read
+    before its sample is written, or a stale entry, would show here). The outputs here are
+    float64 views 4 bytes into a buffer, unaligned, as a message's bytes may be."""
     mv = movement_library()[40]
     q, qd, qdd = mv.evaluate(mv.sample_times(100))
     tau = arm.inverse_dynamics(q, qd, qdd)
     out = mm.geometry_outputs()
-    so_buf, so_new = StaticOptimizer(mm), StaticOptimizer(mm)
+    so_buf, so_new = (StaticOptimizer(mm, passive=passive) for _ in range(2))
+    raw = np.zeros(8 * (2 * mm.n + 20) + 4, np.uint8)
+    views = np.frombuffer(raw.data, np.float64, 2 * mm.n + 20, offset=4)
+    act, frc, res = views[: mm.n], views[mm.n: 2 * mm.n], views[2 * mm.n:]
+    assert not act.flags.aligned
+    n_infeasible = 0
     for k in range(len(q)):
         R, L, V = mm.geometry(q[k], qd[k])
         Rb, Lb, Vb = mm.geometry(q[k], qd[k], out)
@@ -426,9 +434,10 @@ def test_the_nodes_buffered_geometry_and_solve_equal_the_allocating_path(mm, arm
         for x, y in ((R, Rb), (L, Lb), (V, Vb)):
             assert np.array_equal(x, y)
         a = so_new.solve_geometry(R, L, V, tau[k])
-        b = so_buf.solve_geometry(Rb, Lb, Vb, tau[k])
-        for f in ("activations", "forces", "reserves"):
-            assert np.array_equal(getattr(a, f), getattr(b, f)), (k, f)
+        flag, infeasible, _ = so_buf.solve_into(Rb, Lb, Vb, tau[k], act, frc, res)
+        for f, b in (("activations", act), ("forces", frc), ("reserves", res)):
+            assert np.array_equal(getattr(a, f), b), (k, f)
+        assert (flag, infeasible) == (a.exitflag, a.infeasible), k
     spanned = np.zeros_like(out[0], bool)
     spanned[mm.surrogate.pair_rows, mm.surrogate.pair_cols] = True
     assert np.all(out[0][~spanned] == 0.0) and np.any(out[0][spanned] != 0.0)

@@ -276,6 +276,10 @@ class StdTemplate:
         self._end = end + (-end % 4)
 
     def fill(self, sec: int, nsec: int, std) -> bytes:
-        self._pack(self.buf, 4, sec, nsec)
         np.copyto(self.effort, std)
+        return self.stamped(sec, nsec)
+
+    def stamped(self, sec: int, nsec: int) -> bytes:
+        """The payload with this stamp and the efforts already written into `effort`."""
+        self._pack(self.buf, 4, sec, nsec)
         return self.buf[:self._end].tobytes()

@@ -35,6 +35,7 @@ import numpy as np
 
 from .curves import UnitForces
 from .model import MuscleModel, MuscleModelError, _posture
+from .surrogate import clip_ufunc
 
 _EQ_SOFT = 1 + 4 + 8  # daqp sense: ACTIVE | IMMUTABLE (an equality) | SOFT
 # daqp's bound tolerance (default 1e-6 in activation): an activation may end that far
@@ -101,6 +102,7 @@ class StaticOptimizer:
         self._qp = None
         self._rhs_u, self._rhs_l = self._bu[n:], self._bl[n:]
         self._res = np.empty(nj)  # the residual's scratch
+        self._muscles = np.empty(nj)  # solve_into's R·F(a), aligned for BLAS as A @ a makes it
         self._saturated = 1.0 - self.saturation_tol
 
     def reset(self) -> None:
@@ -142,8 +144,7 @@ class StaticOptimizer:
             r = np.full(self._nj, np.nan)
             return MuscleSolution(a, a.copy(), r, True, dt, float("nan"), iters, flag)
         a = x  # this solve's own array (n,): clipped in place
-        np.maximum(a, 0.0, out=a)  # np.clip(a, 0, 1) in two ufunc calls (clip costs ~5 µs)
-        np.minimum(a, 1.0, out=a)
+        clip_ufunc(a, 0.0, 1.0, out=a)  # np.clip's ufunc, not its ~5 µs wrapper
         muscles = self._A @ a  # R·(a·unit): what the activations carry, N·m
         r = np.subtract(self._rhs_u, muscles)  # the reserves: what they leave of τ (− R·P)
         forces = a * unit
@@ -173,6 +174,29 @@ class StaticOptimizer:
         """As solve(), with the geometry already evaluated (model.geometry)."""
         unit, pas = self._problem(R, L, V, tau)
         return self._finish(*self._run(), R, unit, pas, tau)
+
+    def solve_into(self, R, L, V, tau, activations, forces, reserves) -> tuple[int, bool, float]:
+        """solve_geometry for a node's per-sample path: the activations, forces and reserves
+        written into the caller's arrays (its output messages' views), the same numbers to the
+        bit; no MuscleSolution and no residual (R·F + r − τ is τ's rounding by construction of
+        r; solve_geometry reports it). Returns (exitflag, infeasible, QP time s)."""
+        unit, pas = self._problem(R, L, V, tau)
+        x, flag, _, dt = self._run()
+        if flag < 1:
+            activations.fill(np.nan)
+            forces.fill(np.nan)
+            reserves.fill(np.nan)
+            return flag, True, dt
+        clip_ufunc(x, 0.0, 1.0, out=x)
+        # A @ x from daqp's own (aligned) array, the product _finish makes, whatever buffer
+        # the caller's views live in (numpy hands only aligned arrays to BLAS)
+        np.matmul(self._A, x, out=self._muscles)
+        np.subtract(self._rhs_u, self._muscles, out=reserves)
+        np.multiply(x, unit, out=forces)
+        if self.passive:
+            forces += pas
+        np.copyto(activations, x)
+        return flag, bool(x.max() >= self._saturated), dt
 
     def solve_many(self, q, qd, tau) -> MuscleSeries:
         """A recording (N, 20) each, in time order (each sample warm-starts the next)."""

@@ -202,29 +202,29 @@ class MuscleNode(MuscleStatus, Node):
             self._worker.announce(nxt, self.applies_from)
         b = self.bundle
         R, L, V = b.model.geometry(self.q, self.qd, self._geo)
-        sol = b.optimizer.solve_geometry(R, L, V, self.tau)
         out, res = self._outputs.get(frame_id)
-        np.copyto(out.q, sol.activations)
-        np.copyto(out.effort, sol.forces)
+        # activations, forces and reserves written straight into the two messages' bytes
+        flag, infeasible, solve_s = b.optimizer.solve_into(R, L, V, self.tau, out.q,
+                                                           out.effort, res.effort)
         np.copyto(out.qd, V)
         out.pack_stamp(sec, nsec)
         t_pub = _perf_ns()
         self.pub.publish(out.payload())
         if self.reserves_pub is not None:
-            self.reserves_pub.publish(res.fill(sec, nsec, sol.reserves))
+            self.reserves_pub.publish(res.stamped(sec, nsec))
         t_end = _perf_ns()
         # bookkeeping after the clock stops: counters and rings the diagnostics timer reads
-        if sol.exitflag < 1:
+        if flag < 1:
             self.solver_failed += 1
-        if sol.infeasible:
+        if infeasible:
             self.infeasible += 1
-        r = sol.reserves.tolist()  # 20 floats: Python's max beats two numpy reductions
+        r = res.effort.tolist()  # 20 floats: Python's max beats two numpy reductions
         big = max(max(r), -min(r))
         if big > self._reserve_warn:
             self.reserve_use += 1
             if big > self._max_reserve[0]:
-                self._max_reserve = (float(big), JOINT_NAMES[int(np.abs(sol.reserves).argmax())])
-        self._solve_ns[self._n_solve % len(self._solve_ns)] = round(sol.solve_time * 1e9)
+                self._max_reserve = (float(big), JOINT_NAMES[int(np.abs(res.effort).argmax())])
+        self._solve_ns[self._n_solve % len(self._solve_ns)] = round(solve_s * 1e9)
         self._n_solve += 1
         st.published += 1
         st.record(t_end - t_start, recv_ns - (sec * 1_000_000_000 + nsec), t_end - t_pub)
