@@ -426,7 +426,6 @@ def test_the_nodes_buffered_geometry_and_solve_equal_the_allocating_path(mm, arm
     views = np.frombuffer(raw.data, np.float64, 2 * mm.n + 20, offset=4)
     act, frc, res = views[: mm.n], views[mm.n: 2 * mm.n], views[2 * mm.n:]
     assert not act.flags.aligned
-    n_infeasible = 0
     for k in range(len(q)):
         R, L, V = mm.geometry(q[k], qd[k])
         Rb, Lb, Vb = mm.geometry(q[k], qd[k], out)
