@@ -263,7 +263,7 @@ def main(argv=None) -> int:
                     help="directory with more OpenSim IK results (see benchmarks/data/README.md)")
     ap.add_argument("--only", default="", help="comma-separated sensor names (default: all)")
     ap.add_argument("--add", default="", help="comma-separated estimator names scored beside the "
-                    "standard ones at their defaults (e.g. selector; use with --out elsewhere: the "
+                    "standard ones at their defaults (e.g. butterworth; use with --out elsewhere: the "
                     "docs tables are the standard ones)")
     ap.add_argument("--table", action="store_true",
                     help="print the docs/estimation.md tables from --out (no benchmark run)")

@@ -4,9 +4,9 @@
 
 Streams: 1 kHz with velocities (what the node benchmark streams) and 100 Hz positions only
 (a mocap file), a 0.7 Hz movement on every joint through 0.3 deg (1 deg/s) white noise, the
-first tenth discarded; the default settings, with delay_s 0.05, positions only with issue 29's opt-in
-practice gain, the opt-in `selector` (estimation/selector.py: three estimators per sample)
-and the causal Butterworth for scale. The p99 of a positions-only stream is its noise
+first tenth discarded; the default settings, with delay_s 0.05, positions only with issue 29's
+practice filter off (the model alone: what the filter costs) and the causal Butterworth for
+scale. The p99 of a positions-only stream is its noise
 updates (every 0.25 s: 4 % of the samples at 100 Hz): the regroups, and any Riccati solve
 that seats a group there (ca_model.steady_posterior, cached since issue 29 item 5). Timing:
 noisy on a shared machine; state `uptime` with the numbers.
@@ -24,8 +24,7 @@ from forearm_dynamics.estimation import make_estimator
 
 CASES = (("1 kHz, velocities, default", 1000.0, True, {}),
          ("100 Hz, positions, default", 100.0, False, {}),
-         ("100 Hz, positions, practice gain (opt-in)", 100.0, False,
-          {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}),
+         ("100 Hz, positions, practice filter off", 100.0, False, {"practice_filter": 0.0}),
          ("1 kHz, velocities, delay 0.05 s", 1000.0, True, {"delay_s": 0.05}),
          ("100 Hz, positions, delay 0.05 s", 100.0, False, {"delay_s": 0.05}),
          # the delayed estimate's practice blend (practice_lag.py) against the model's smoother
@@ -35,8 +34,7 @@ CASES = (("1 kHz, velocities, default", 1000.0, True, {}),
          ("1 kHz, positions, delay 0.05 s, model smoother only", 1000.0, False,
           {"delay_s": 0.05, "delay_practice_hz": 0.0}),
          ("1 kHz, positions, default", 1000.0, False, {}),
-         ("100 Hz, positions, selector (opt-in)", 100.0, False, {"estimator": "selector"}),
-         ("1 kHz, positions, selector (opt-in)", 1000.0, False, {"estimator": "selector"}),
+         ("1 kHz, positions, practice filter off", 1000.0, False, {"practice_filter": 0.0}),
          ("100 Hz, positions, butterworth", 100.0, False, {"estimator": "butterworth"}))
 
 

@@ -181,7 +181,8 @@ def test_kalman_error_covariance_is_its_steady_state_covariance() -> None:
         x = f @ x + chol @ rng.standard_normal((3, N_COLS))
         truth[k] = x
     z = truth[:, 0, :] + rng.normal(0.0, r, (n_s, N_COLS))
-    e = make_estimator("kalman", N_COLS, {"kalman_jerk_psd": psd, "kalman_noise_deg": 0.5})
+    e = make_estimator("kalman", N_COLS, {"kalman_jerk_psd": psd, "kalman_noise_deg": 0.5,
+                                          "practice_filter": 0.0})  # the model's own q̈
     eq, eqd, eqdd, _ = feed(e, stamps(n_s, dt), z)
     k, p_prior = steady_state(dt, r, None, psd)
     h = np.array([[1.0, 0.0, 0.0]])

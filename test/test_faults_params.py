@@ -156,8 +156,8 @@ INVALID = [
     ("torque_node", ["publish_std:=true", "subject_std:=ansur2"], "subject_std"),
     ("torque_node", ["estimator.kalman_min_bandwidth_hz:=-1.0"], "estimator.kalman_min_bandwidth_hz"),
     ("torque_node", ["estimator.kalman_min_bandwidth_hz:=.nan"], "estimator.kalman_min_bandwidth_hz"),
-    ("torque_node", ["estimator.practice_band_hz:=-1.0"], "estimator.practice_band_hz"),
-    ("torque_node", ["estimator.practice_band_hz:=.nan"], "estimator.practice_band_hz"),
+    ("torque_node", ["estimator.practice_filter:=-1.0"], "estimator.practice_filter"),
+    ("torque_node", ["estimator.practice_filter:=0.5"], "estimator.practice_filter"),
     ("torque_node", ["estimator.delay_practice_hz:=-1.0"], "estimator.delay_practice_hz"),
     ("torque_node", ["estimator.delay_s:=0.5"], "estimator.delay_s"),  # beyond 0.2 s
     ("torque_node", ["estimator.delay_s:=-0.01"], "estimator.delay_s"),

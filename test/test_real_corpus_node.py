@@ -8,11 +8,10 @@ node gets every joint (the unmeasured ones at 0, as mot_to_bag sends them), stam
 recording's 100 Hz from now. Scored after realscore.SETTLE_S (1 s), NRMSE = RMSE / the
 reference's peak-to-peak, on the stamps the node answered. The bound is the issue's target,
 "never worse than the causal 6 Hz Butterworth on any DOF of any raw recording": ratio <= 1.0
-per measured DOF (elbow, pro/sup, wrist flexion, wrist deviation); it is not loosened to
-today's estimator. The same replay with issue 29's opt-in practice gain (node parameters
-estimator.practice_band_hz 6, estimator.kalman_min_bandwidth_hz 0) meets it. The last test
-shows the benchmark's offline path is the node's: the node's torques equal
-realscore.node_outputs' at equal stamps.
+per measured DOF (elbow, pro/sup, wrist flexion, wrist deviation). The model alone (the
+default before issue 29's practice filter: estimator.practice_filter 0) did not meet it here
+(wrist flexion 1.083 x). The last test shows the benchmark's offline path is the node's: the
+node's torques equal realscore.node_outputs' at equal stamps.
 """
 
 from __future__ import annotations
@@ -46,23 +45,9 @@ def _recording():
     return next(r for r in load("held_out") if r.name == RECORDING)
 
 
-#: issue 29's opt-in practice gain, as the benchmark's kalman_practice_gain row runs it
-PRACTICE_GAIN = ("-p", "estimator.practice_band_hz:=6.0", "-p", "estimator.kalman_min_bandwidth_hz:=0.0")
-
-
-@pytest.fixture(scope="module")
-def replay_selector():
-    return _replay("-p", "estimator:=selector")
-
-
 @pytest.fixture(scope="module")
 def replay():
     return _replay()  # no parameter: the defaults a user gets
-
-
-@pytest.fixture(scope="module")
-def replay_practice_gain():
-    return _replay(*PRACTICE_GAIN)
 
 
 def _replay(*ros_args: str):
@@ -103,28 +88,8 @@ def _scores(rec, stamps, out_st, tau, arm):
     return realscore.score(out_st, tau[:, rec.columns], stamps, tau_ref[:, rec.columns])
 
 
-# Issue 29's target, not met by the default estimator (main's kalman): wrist_flexion 1.083x
-# on this held-out recording (1.087x before the group-seating fix). strict: the day the
-# default meets it, this xfail fails and must be removed. The issue stays open until then
-# (the opt-in practice gain meets it here: the next test; not on 30 other held-out series).
-@pytest.mark.xfail(strict=True, reason="issue 29 open: the default estimator is worse than the "
-                   "causal 6 Hz Butterworth on this recording's wrist_flexion (1.083x)")
 def test_raw_recording_through_torque_node_no_worse_than_butterworth(replay) -> None:
     _no_worse_than_butterworth(replay, "defaults")
-
-
-def test_raw_recording_through_torque_node_with_the_practice_gain(replay_practice_gain) -> None:
-    """The same with the opt-in practice gain (measured per DOF in benchmarks/real_corpus.json:
-    elbow 0.996, pro/sup 0.607, wrist flexion 0.773, deviation 0.892 x the Butterworth)."""
-    _no_worse_than_butterworth(replay_practice_gain, "practice_band_hz 6")
-
-
-def test_raw_recording_through_torque_node_with_the_selector(replay_selector) -> None:
-    """The same with the opt-in selector (estimation/selector.py; benchmarks/real_corpus.json:
-    elbow 0.936, pro/sup 0.625, wrist flexion 0.740, deviation 0.856 x the Butterworth), and
-    the node's torques are the benchmark's offline replay of the selector at equal stamps."""
-    _no_worse_than_butterworth(replay_selector, "estimator selector")
-    _equals_offline(replay_selector, "selector")
 
 
 def _no_worse_than_butterworth(replay, what: str) -> None:

@@ -38,6 +38,7 @@ pytestmark = pytest.mark.ros
 
 MS = 1_000_000
 N = 4000  # samples at 1 kHz
+DEPTH = 10_000  # history of the input and output topics (messages)
 RNG = np.random.default_rng(7)
 Q0 = RNG.uniform(-0.3, 0.3, 20)
 # a twentieth of the first draws: 4 s at +-2 rad/s^2 moved joints by up to 18 rad, far outside
@@ -78,14 +79,18 @@ def test_live_changes_during_a_1khz_replay() -> None:
 def _live_changes_during_a_1khz_replay() -> None:
     # the backward estimator: exact for this constant-acceleration stream after one sample,
     # so every output can be checked against the model in force to 1e-9
-    proc = rosproc.start("torque_node", "-p", "diagnostics_period:=0.5", "-p", "estimator:=backward")
+    # 10 s of history each way (the default 1 s rides out the node's own stalls): this process
+    # both feeds at 1 kHz and receives, and on a loaded machine it stalled for longer than 1 s,
+    # its reliable queues overflowed and the replies stopped at 3 749 of 4 000 (CI, 2026-12-06)
+    proc = rosproc.start("torque_node", "-p", "diagnostics_period:=0.5", "-p", "estimator:=backward",
+                         "-p", f"qos_depth:={DEPTH}")
     peer = rosproc.Peer("live_test")
     try:
         node = peer.node
-        pub = node.create_publisher(JointState, "joint_states", stream_qos(1000))
+        pub = node.create_publisher(JointState, "joint_states", stream_qos(DEPTH))
         outputs: list[tuple[int, JointState]] = []
         node.create_subscription(JointState, "joint_torques",
-                                 lambda m: outputs.append((time.time_ns(), m)), stream_qos(5000))
+                                 lambda m: outputs.append((time.time_ns(), m)), stream_qos(DEPTH))
         configs: list[tuple[int, dict]] = []
         latched = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -15,12 +15,11 @@ from .base import SettingSpec, StateEstimator
 from .butterworth import ButterworthDifference
 from .kalman import KalmanCA
 from .savgol import SavitzkyGolay
-from .selector import PracticeSelector
 
 #: name -> class. The first entry is the default (chosen by benchmarks/estimation.py).
 ESTIMATORS: dict[str, type[StateEstimator]] = {
     cls.name: cls
-    for cls in (KalmanCA, BackwardDifference, ButterworthDifference, SavitzkyGolay, PracticeSelector)
+    for cls in (KalmanCA, BackwardDifference, ButterworthDifference, SavitzkyGolay)
 }
 
 #: What the estimation benchmark measured best for measured (noisy, positions-only) input at

@@ -50,14 +50,13 @@ benchmarks/estimation_zoo.py, whose committed output states the default's number
 delay (delay_s > 0) the cap is off: the smoother sees each sample from both sides, as the
 practice does (mocap IK 100 Hz, delay 50 ms: 1.27 / 1.04 x the offline floor uncapped,
 1.43 / 1.62 x capped at 8 Hz).
-Issue 29's practice gain is an option (estimator.practice_band_hz 6 with
-kalman_min_bandwidth_hz 0; off by default): on raw recordings of real arm movements
-(benchmarks/real_corpus.py) coloured content above 6 Hz is what the practice removes, so it
-is smoothed like noise; and, causal with positions only, each joint's gain is computed with
-its measured jerk density (r_eff = r sqrt(psd / s_j), at most 4 r) and its q̇, q̈ are scaled
-by their online regression gain on the practice's (practice_gain.py). It is not the default
-because the σ is not yet calibrated with it on the simulated sensors and the simulated
-sensor zoo is worse with it (docs/estimation.md, docs/uncertainty.md).
+The practice filter (issue 29; estimator.practice_filter, on by default; causal, positions
+only): on raw recordings of real arm movements the torques are judged against the offline
+practice (6 Hz zero-phase + derivatives) and nearly all of their error is q̈'s; a noisy joint
+that passes content the practice removes (coloured noise, or a model wider than 6 Hz) gets
+as q̈ the blend of the model's and a fixed causal filter's designed on such recordings
+(practice_fir.py), weighted per joint by what the practice says of each (practice_blend.py;
+which joints and how: practice_output.py). q and q̇ stay the model's.
 White noise (band and white levels alike: a camera, a
 glove, an encoder) is noise at every frequency and is smoothed as strongly as it says.
 The jump
@@ -109,14 +108,16 @@ from .gate import JumpGate
 from .noise import NoiseEstimator
 from .noise_belief import NoiseBelief
 from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
-from .practice_gain import PracticeGain
+from .practice_blend import PracticeBlend
+from .practice_fir import PracticeFIR
 from .practice_lag import PracticeLag
+from .practice_output import BAND_HZ, PracticeOutput
 
 NOISE_EVERY_S = 0.25
 MAX_DELAY_S = 0.2
 
 
-class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
+class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEstimator):
     """White-jerk Kalman filter, per-joint noise; see the module docstring."""
 
     name = "kalman"
@@ -135,14 +136,13 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
         SettingSpec("kalman_min_bandwidth_hz", 7.0, "Hz",
                     "causal, positions only, coloured noise: never smooth below this band (keeps "
                     "what the offline 6 Hz practice keeps): the belief is capped where the "
-                    "filter's bandwidth reaches it; 0 = off (set 0 with practice_band_hz: "
-                    "docs/estimation.md)", lo=0.0, hi=1000.0),
-        SettingSpec("practice_band_hz", 0.0, "Hz",
-                    "opt-in (issue 29), causal, positions only: scale each joint's qd and qdd by "
-                    "their online least-squares gain on the offline practice's (zero-phase "
-                    "low-pass at this band + derivatives), measured per joint (practice_gain.py); "
-                    "6 with kalman_min_bandwidth_hz 0 is the measured setting "
-                    "(docs/estimation.md); 0 = off", lo=0.0, hi=1000.0),
+                    "filter's bandwidth reaches it; 0 = off", lo=0.0, hi=1000.0),
+        SettingSpec("practice_filter", 1.0, "",
+                    "causal, positions only: 1 = a noisy joint that the model filters wider than "
+                    "6 Hz or whose noise is coloured gets as q̈ the blend of the model's and the "
+                    "practice filter's (a causal kernel designed on real arm movements), weighted "
+                    "per joint against the offline practice (practice_output.py); 0 = the model's "
+                    "own q̈ on every joint", lo=0.0, hi=1.0),
         SettingSpec("delay_practice_hz", 6.0, "Hz",
                     "with delay_s >= 0.04 s, positions only: the delayed estimate of a noisy joint with "
                     "coloured noise or a model wider than this band moves towards the offline "
@@ -166,8 +166,6 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
         # per-joint noise belief (rad, rad/s); before any estimate: 0.5 deg, 1 deg/s
         self._r = np.full(n, self._fixed_r or math.radians(0.5))
         self._r_gate = self._r.copy()
-        self._r_eff = self._r.copy()  # the noise the gains are computed with (psd / r_eff^2)
-        self._rscale2 = np.ones(n)  # (r / r_eff)^2 per joint
         self._wmin = 2.0 * math.pi * v["kalman_min_bandwidth_hz"]
         self._rv = np.full(n, self._fixed_rv or math.radians(1.0))
         self._X = np.zeros((3, n))
@@ -203,15 +201,21 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
         self._first: tuple[int, np.ndarray] | None = None
         self._restarted = False
         self._jump_exact = False
-        band = v["practice_band_hz"]
-        self._pgain = PracticeGain(n, band) if band > 0.0 and self.delay_s <= 0.0 else None
+        if v["practice_filter"] not in (0.0, 1.0):
+            raise ValueError(f"estimator setting practice_filter = {v['practice_filter']!r} must be 0 or 1")
+        on = v["practice_filter"] == 1.0 and self.delay_s <= 0.0
+        self._pfir = PracticeFIR(n) if on else None  # the practice filter (practice_output.py)
+        self._pblend = PracticeBlend(n, BAND_HZ) if on else None
+        self._pf_q: np.ndarray | None = None  # the last sample's positions (gate: prediction)
+        self._pf_use = np.zeros(n, bool)  # the rule's joints
+        self._pf_was = np.zeros(n, bool)
+        self._pf_w = np.zeros(n)  # their share of the blend in q̈, faded in and out
+        self._pf_fading = False
         lag_band = v["delay_practice_hz"]
         on = lag_band > 0.0 and self.delay_s >= practice_lag.MIN_DELAY_S
         self._plag = PracticeLag(n, lag_band) if on else None
         self._plag_use = np.zeros(n, bool)  # joints whose delayed estimate is the practice's
         self._plag_use_was = np.zeros(n, bool)
-        self._gain = np.ones((2, n))  # the practice gains in use (1: none; noiseless joints)
-        self._pg_residual = np.zeros((2, n))
         # the last sample for the noise statistics, taken after the output (learn())
         self._pending = False
         self._pend_t = 0
@@ -229,25 +233,6 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
     def outliers(self) -> int:
         return self.gate.outliers
 
-    def output_gain(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """With the practice gain on (causal, positions only): ((2, n) the gains applied to
-        (qd, qdd), (2, n) the mean square error of the scaled (qd, qdd) against the practice
-        as measured, 0 on exact joints); else None."""
-        if self._pgain is None or self._vel:
-            return None
-        return self._gain.copy(), self._pg_residual.copy()
-
-    def shrink_removed(self) -> np.ndarray | None:
-        """With the practice gain on (causal, positions only): (2, n) what the gains took from
-        the last output's (qd, qdd), (1 - g) x with x the filter's own estimate; else None.
-        The σ propagates it through the derivatives as one vector (uncertainty/torque_std.py):
-        it is the same movement shrunk on every joint at once, not independent noise."""
-        if self._pgain is None or self._vel:
-            return None
-        out = 1.0 - self._gain
-        out *= self._X[1:]
-        return out
-
     @property
     def period_s(self) -> float:
         """The last sample period (s) the filter stepped with."""
@@ -261,7 +246,7 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
         out = np.zeros((self.n, 3, 3))
         for g in self._groups:
             if g.P is not None:
-                out[g.idx] = ca_model.to_matrix(g.P) * self._rscale2[g.idx, None, None]
+                out[g.idx] = ca_model.to_matrix(g.P)
         return out
 
     # -- state ----------------------------------------------------------------------------
@@ -278,8 +263,8 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
 
     def _restart_windows(self) -> None:
         """The windows over past samples that no restart may span: the smoother's, the
-        practice gain's and the practice lag's (reset() and the gate's discontinuity)."""
-        for part in (self._smoother, self._pgain, self._plag):
+        practice lag's and the practice filter's (reset() and the gate's discontinuity)."""
+        for part in (self._smoother, self._plag, self._pfir, self._pblend):
             if part is not None:
                 part.restart()
 
@@ -314,6 +299,9 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
         if self._t_ns is None:
             self._start(t_ns, q, qd)
             self.noise_estimator.add(t_ns, q, qd)
+            if self._pfir is not None and qd is None:
+                self._pfir.push(t_ns, q)
+                self._pf_q = q
             return self._output(t_ns, False, vel)
         dt = (t_ns - self._t_ns) * 1e-9
         if vel != self._vel or not self._groups:
@@ -344,6 +332,8 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
                     self._smoother.add_to_previous(corr)
                 if self._plag is not None:
                     self._plag.restore_last(genuine, self._held_q)
+                if self._pfir is not None:
+                    self._pfir.restore_last(genuine, self._held_q)
                 t3 += f @ corr
         self._dt = dt
         self._t_ns = t_ns
@@ -369,11 +359,15 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
             x += self._tmp3
         x += t3
         self._count += 1
-        if self._pgain is not None and not vel:
-            self._pgain.add(q, x[1], x[2])
         qin = np.where(gate.held, t3[0], q) if held else q  # a held joint: the prediction
         if self._plag is not None and not vel:
             self._plag.push(t_ns, qin)
+        if self._pfir is not None and not vel:
+            if not self._pfir.K:  # the first step's period until the nominal is known
+                self._pfir.configure(dt)
+                self._pblend.configure(dt)
+            self._pfir.push(t_ns, qin)
+            self._pf_q = qin
         self._since_noise += dt
         due = self._since_noise >= NOISE_EVERY_S
         if due or not self.noise_estimator.period_s:  # a noise update or no rate yet: now
@@ -391,14 +385,16 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
             self._update_noise(vel, dt)
             if self._plag is not None and self.noise_estimator.white_evaluations:
                 self._practice_lag_joints()
+            if self._pfir is not None and not vel:
+                self._practice_filter_joints()
         return self._output(t_ns, self._count >= (2 if vel else 3), vel)
 
     def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
         if self.delay_s > 0.0:
             return self._output_delayed(t_ns, warm, vel)
         np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
-        if self._pgain is not None and not vel:
-            self._out[1:] *= self._gain
+        if self._pfir is not None and not vel and self._pfir.K:
+            self._practice_filter_output(self._pf_q)
         self.stamp_ns = t_ns
         if self.gate.pending and self.gate.jump and self._jump_exact:
             # held beyond the discontinuity threshold: most likely a jump (two movements
@@ -422,7 +418,7 @@ class KalmanCA(DelayedOutput, NoiseGroups, NoiseBelief, StateEstimator):
         if g is not None and len(g.k) == 3 * m and abs(g.dt - dt) <= 1e-3 * dt:
             k = np.array(g.k).reshape(3, m)  # the gain in use: no Riccati solve on a node thread
         else:
-            r = float(self._r_eff.max())
+            r = float(self._r.max())
             k, _ = steady_state(dt, r, float(self._rv.max()) if velocity_given else None, self.psd)
         d = ca_model.qdd_lag(dt, k, velocity_given)
         return {"q": 0.0, "qd": 0.0, "qdd": max(0.0, d - self.delay_s)}

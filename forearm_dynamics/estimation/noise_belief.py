@@ -1,8 +1,8 @@
 """The Kalman filter's noise belief per joint: what it measures, caps and applies.
 
 Why apart from the filter (kalman.py): the belief is where the filter meets the data
-(noise.py's estimates every NOISE_EVERY_S, the 7 Hz cap for coloured noise, issue 29's
-practice gain, which joints blend the practice into a delayed estimate: practice_lag.py),
+(noise.py's estimates every NOISE_EVERY_S, the 7 Hz cap for coloured noise, which joints
+blend the practice into a delayed estimate: practice_lag.py),
 and where the σ reads what the filter believes (measured_noise, noiseless,
 noise_known). `NoiseBelief` is a mixin of KalmanCA; the reasons for each rule are in
 kalman.py's module docstring.
@@ -18,9 +18,6 @@ from . import practice_lag
 
 EXACT_WHITE = 0.1  # white level (x the floor) under which a joint's q̈ is taken as exact
 COLOURED_RATIO = 1.5  # band level / white level above which the noise counts as coloured
-#: the measured jerk level may narrow a joint's filter by at most this factor on its noise
-#: (bandwidth x R_EFF_MAX^(-1/3)): a slow movement that speeds up, or a gap, is followed
-R_EFF_MAX = 4.0
 # the white level's evaluations before it may arm the gate without the 10 Hz estimate (fewer:
 # a 5 deg sensor read low enough for a false jump on a fast 30 Hz movement)
 WHITE_ARM_EVALUATIONS = 25
@@ -43,11 +40,6 @@ class NoiseBelief:
     def noise_per_joint(self) -> np.ndarray:
         """The position noise std each joint believes (rad), (n,) copy."""
         return self._r.copy()
-
-    def gain_noise_per_joint(self) -> np.ndarray:
-        """The noise each joint's gain is computed with (rad), (n,) copy: the belief times
-        sqrt(kalman_jerk_psd / the joint's measured jerk density) (practice_gain.py), capped."""
-        return self._r_eff.copy()
 
     def noise(self) -> float | None:
         """One summary of the believed position noise (rad): the median over the joints
@@ -110,23 +102,6 @@ class NoiseBelief:
                 capped[self._r > white] = cap
                 np.minimum(capped, self._r, out=self._r)
                 np.maximum(self._r, self._floor, out=self._r)
-            np.copyto(self._r_eff, self._r)
-            pg = self._pgain
-            if pg is not None and pg.ready and not vel:
-                # the movement's own band, measured: the gain depends on psd / r^2 only, so
-                # a joint whose practice-band jerk has the spectral density s_j is filtered
-                # as the library's psd would filter r sqrt(psd / s_j) (a slow reach: s_j ~100 x
-                # below the library's 3e3); the belief r itself stays the noise as measured
-                r_eff = self._r_gate * np.sqrt(self.psd / np.maximum(pg.jerk_psd(), 1e-6 * self.psd))
-                np.minimum(r_eff, R_EFF_MAX * self._r_gate, out=r_eff)
-                np.minimum(capped, r_eff, out=self._r_eff)
-                np.maximum(self._r_eff, self._floor, out=self._r_eff)
-            # the innovations' prior variance: the groups' (at psd, r_eff) scaled to the joint's
-            # belief r (psd / r_eff^2 = s_j / r^2: the same gain, covariances x (r / r_eff)^2);
-            # r, not the gate's uncapped noise: without the practice gain r_eff = r, scale 1,
-            # and the gate and covariance() are main's (the 7 Hz cap's belief, as before)
-            np.divide(self._r, self._r_eff, out=self._rscale2)
-            self._rscale2 *= self._rscale2
             self._innovation_std()  # not the groups' recursions: they are converged (still)
             self._armed = moved = True
             self._applied[0] = True
@@ -147,18 +122,6 @@ class NoiseBelief:
             self._applied[1] = True
         if moved:
             self._regroup(vel, dt)
-        pg = self._pgain
-        if pg is not None and not vel and ne.period_s > 0.0:
-            pg.configure(ne.period_s)  # kernels once per rate
-            np.copyto(self._gain, pg.update_gain())
-            self._pg_residual = pg.residual(pg.gain)
-            if ne.white_evaluations:  # exact or held joints (no white level at all, even with
-                # a fixed noise belief): their q̈ is the input's own, gain 1. Not the gate's
-                # 2 x floor: a real marker elbow reads 0.017 deg there (UE-ADL) and is exactly
-                # the joint whose coloured content above 6 Hz must be calibrated away
-                exact = ne.white(self._tmp) <= EXACT_WHITE * self._floor
-                self._gain[:, exact] = 1.0
-                self._pg_residual[:, exact] = 0.0
 
     def _practice_lag_joints(self) -> None:
         """The joints whose delayed estimate blends in the practice's (practice_lag.py): noisy
@@ -175,7 +138,7 @@ class NoiseBelief:
         white = ne.white(self._tmp)
         np.greater(white, EXACT_WHITE * self._floor, out=use)
         dt = ne.period_s or self._dt
-        wide = self.psd / (self._r_eff**2 * dt) > (2.0 * math.pi * self._plag.cutoff_hz) ** 6
+        wide = self.psd / (self._r**2 * dt) > (2.0 * math.pi * self._plag.cutoff_hz) ** 6
         coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
         use &= wide | coloured
         np.copyto(was, use)

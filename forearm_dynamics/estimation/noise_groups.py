@@ -15,7 +15,7 @@ its exact steady state as soon as its (q̇, q̈) covariance is within SETTLED of
 slow mode (velocities given, its variance falls from r^2 as the velocities integrate, 2 000-
 70 000 steps at 1 kHz to 1e-3) is not what the restart got wrong, and would keep the
 recursion running for seconds. `NoiseGroups` is a mixin of
-KalmanCA: it reads the filter's noise beliefs (_r_eff, _rv, _r_gate, _rscale2, _floor,
+KalmanCA: it reads the filter's noise beliefs (_r, _rv, _r_gate, _floor,
 _fixed_r, _fixed_rv) and writes the per-joint gains (_Kp, _Kv) and innovation stds (_sig).
 """
 
@@ -86,7 +86,7 @@ class NoiseGroups:
     def _regroup(self, vel: bool, dt: float) -> None:
         """Bin each joint's noise (hysteresis) and rebuild the groups if the bins changed."""
         changed = vel != self._vel
-        for row, r in ((0, self._r_eff), (1, self._rv)):
+        for row, r in ((0, self._r), (1, self._rv)):
             if row == 1 and not vel:
                 if (self._bins[1] != 0).any():
                     self._bins[1].fill(0)
@@ -169,10 +169,9 @@ class NoiseGroups:
 
     def _innovation_std(self) -> None:
         """Per joint innovation std with the noise as measured: the group's prior variance
-        scaled to the joint's own ((r / r_eff)^2) plus r^2."""
+        plus the gate's r^2."""
         sig = self._sig
         np.take(self._Sg, self._gidx, out=sig)
-        sig *= self._rscale2
         np.multiply(self._r_gate, self._r_gate, out=self._tmp)
         sig += self._tmp
         np.sqrt(sig, out=sig)

@@ -4,7 +4,7 @@ Why (issue 29). With estimator.delay_s = d the estimate of the sample at t is ou
 the samples up to t + d are in. The offline practice that real recordings are judged
 against (6 Hz zero-phase Butterworth + derivatives; offline/realscore.py) is a fixed linear
 kernel over the samples around t: practice_p(t) = sum_m k_p[m] q(t + m dt), m = -h .. h
-(p = 0, 1, 2: q, q̇, q̈; practice_gain.practice_kernels: the filter's impulse response
+(p = 0, 1, 2: q, q̇, q̈; practice_blend.practice_kernels: the filter's impulse response
 differentiated, exact on cubics). The model's fixed-lag smoother (smoother.py) is the best
 estimate of the *truth* under the white-jerk model with white noise; against the practice
 it is wrong wherever the model's noise and jerk beliefs keep content the 6 Hz band removes
@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .practice_gain import practice_kernels
+from .practice_blend import practice_kernels
 
 #: half width (s) of the practice's kernel: 0.5 s keeps its tail (0.2 s did not: above)
 HALF_S = 0.5

@@ -192,25 +192,6 @@ class Propagator:
         self._const += NUMERIC_FLOOR_VAR
         self._lag_weights(lag_per_jerk)
 
-    def add_bias(self, dqd: np.ndarray, dqdd: np.ndarray) -> np.ndarray:
-        """After a call: add the square of one bias vector of the state, (q̇, q̈) off by
-        (dqd, dqdd) on every joint at once, through the last linearisation's derivatives,
-        b = ∂τ/∂q̇ dqd + M dqdd, to var_lag and the σ. For a bias the movement itself makes
-        on all joints (the practice gain's shrink: every joint's q̈ scaled down at the same
-        instant), which M's off-diagonal terms add in amplitude, not in quadrature as a
-        per-joint variance would (issue 29: 9 simulated movements, 0.5 deg, 100 Hz: σ 0.72x
-        the RMSE, 85 % inside ±1.96σ with the shrink's error as a per-joint variance)."""
-        d = self.data
-        b = d.dtau_dv @ dqd
-        b += d.M @ dqdd
-        b *= b
-        self.var_lag += b
-        s = self.std
-        s *= s
-        s += b
-        np.sqrt(s, out=s)
-        return s
-
     def __call__(self, q, qd, qdd, cov, lag_per_jerk, jerk_ms, relinearise: bool = True) -> np.ndarray:
         """σ (n,) at the state; jerk_ms (n,) the mean-square jerk of each joint ((rad/s³)²).
         relinearise False: the derivatives and Var_est of the last linearise()."""

@@ -138,6 +138,7 @@ class StateSource:
         self._dt: float | None = None
         self._dt_seat = 1.0
         self._key: tuple | None = None
+        self._pf: np.ndarray | None = None  # the practice filter's shares at the last refresh
         what = ("the covariance of (q, qd, qdd) that the measurement noise drives through the "
                 f"{est.name} filter's gain (discrete Lyapunov, noise measured per joint)"
                 if covariance == "noise" else f"{est.name} posterior covariance P of (q, qd, qdd)")
@@ -221,21 +222,12 @@ class StateSource:
         g0 = np.maximum(gi, 0)
         cov = np.einsum("jm,jmc->jc", w, unit[g0])
         dnv = np.einsum("jm,jm->j", w, dvar[g0])
-        pg = est.output_gain() if not velocity_given else None
-        if pg is not None:
-            # the output is (q, g_v qd, g_a qdd) (practice_gain.py, issue 29): the noise part
-            # scaled by the gains, and the scaled estimate's error against the practice as
-            # measured added to the qd, qdd variances (it holds what the shrink leaves)
-            g, res = pg
-            gv, ga = g
-            cov[:, 1] *= gv
-            cov[:, 2] *= ga
-            cov[:, 3] *= gv * gv
-            cov[:, 4] *= gv * ga
-            cov[:, 5] *= ga * ga
-            cov[:, 3] += res[0]
-            cov[:, 5] += res[1]
-            dnv = dnv * ga * ga
+        self._pf = None
+        if not velocity_given:
+            w = est.practice_filter_weight()
+            if w.any():  # cov() adds the blend's error variance at every evaluation
+                self._pf = w
+                self.lag_scale2 *= (1.0 - w) ** 2
         if np.ptp(cov, axis=0).max() <= 1e-15 * max(np.abs(cov).max(), 1e-300):
             self._noise = tuple(float(x) for x in cov[0])  # shared: the propagator's fast path
             self.delta_noise_var = float(dnv[0])
@@ -243,6 +235,26 @@ class StateSource:
             self._noise = cov
             self.delta_noise_var = dnv
         self._key, self._t = key, t_s
+
+    def _practice_filter(self, base) -> np.ndarray:
+        """The practice filter's joints (estimation/practice_output.py): their q̈ is the blend
+        of the model's and the filter's, share w of the blend (w as at the last refresh).
+        Its error variance now (practice_blend.error_variance: the two estimates' recent
+        disagreement scaled by the blend's error against the practice over it, as measured)
+        is their q̈ variance, w² of it beside (1 - w)² of the model's noise part; the model's
+        q̈ covariances with q, q̇ and its lag part (lag_scale2, at the refresh) keep (1 - w)
+        of their weight. (The blend's error is measured whole, noise and lag together: the
+        lag part must not count it twice.) Per evaluation, not per refresh: the
+        disagreement follows the movement."""
+        w = self._pf
+        cov = np.empty((self.est.n, 6))
+        cov[:] = base
+        keep = 1.0 - w
+        cov[:, 2] *= keep
+        cov[:, 4] *= keep
+        cov[:, 5] *= keep * keep
+        cov[:, 5] += w * w * self.est.practice_filter_variance()
+        return cov
 
     def measured_noise(self) -> tuple[np.ndarray, np.ndarray]:
         """Per joint (position, velocity) noise variances that drive the error (the filter's
@@ -256,7 +268,9 @@ class StateSource:
             if np.ptp(c, axis=0).max() == 0.0:
                 return tuple(float(x) for x in c[0])
             return c
-        return self._noise if self._known else None
+        if not self._known:
+            return None
+        return self._noise if self._pf is None else self._practice_filter(self._noise)
 
 
 def state_source(est, covariance: str = "noise") -> StateSource | None:

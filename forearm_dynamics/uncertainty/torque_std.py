@@ -62,7 +62,6 @@ class TorqueStd:
         self._holds_update = False  # self.std holds the last update()'s σ (not a prediction's)
         self.evaluated_ns: int | None = None  # the stamp the σ in self.std was evaluated at
         self._jerk_ms = self.jerk.ms_jerk  # the mean-square jerk at the last evaluation
-        self._shrink: np.ndarray | None = None  # est.shrink_removed() at the last update
 
     def reset(self) -> None:
         self.jerk.reset()
@@ -98,12 +97,6 @@ class TorqueStd:
         if self.subject is not None:  # at the same cadence as the estimation part
             self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
         self.prop(est.q, est.qd, est.qdd, cov, self.src.lag if self.use_lag else None, self._jerk_ms, True)
-        # the practice gain's shrink (estimation/practice_gain.py): a bias the movement makes,
-        # one vector on all joints, with the lag part (lag.py: both are what a causal estimate
-        # systematically misses of the movement)
-        self._shrink = est.shrink_removed() if self.use_lag else None
-        if self._shrink is not None:
-            self.prop.add_bias(self._shrink[0], self._shrink[1])
         self.evaluated_ns = t_ns
         return True
 
@@ -122,8 +115,6 @@ class TorqueStd:
         if self.subject is not None:
             self.subject.variance(est.q, est.qd, est.qdd, out=self.prop.var_subject)
         self.prop(est.q, est.qd, est.qdd, cov_h, lag, self._jerk_ms, True)
-        if self._shrink is not None:  # the last update's (the gains move every 0.25 s)
-            self.prop.add_bias(self._shrink[0], self._shrink[1])
         self._holds_update = False  # self.std is this prediction's: update() propagates afresh
         return True
 

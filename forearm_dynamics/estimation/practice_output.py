@@ -1,0 +1,102 @@
+"""The Kalman filter's causal q̈ with the practice filter (issue 29), apart from the filter.
+
+Which joints (`_practice_filter_joints`, at every noise update, every 0.25 s): positions
+only, causal, the noise measured, and per joint noisy (white level above EXACT_WHITE x the
+floor: not exact or held input) and either filtered by the model wider than the practice's
+6 Hz, (psd / (r^2 dt))^(1/6) > 2 pi 6 Hz, or with coloured noise (band level above
+COLOURED_RATIO x the white level; once in, down to practice_lag.KEEP_RATIO): such a joint
+passes content the practice removes. The same rule as the delayed estimate's blend
+(practice_lag.py). A joint the model filters narrower with white noise (a 1.5 deg glove at
+90 Hz, a 3 deg camera at 30 Hz) keeps the model: nothing above the band is passed, and the
+model, right for white noise, is the better estimate (real corpus's tuning half with 1 deg
+of added white noise: model 0.62 x the Butterworth, the practice filter 0.83 x; 3 deg:
+0.40 x against 0.83 x; /tmp study).
+
+Output (`_practice_filter_output`): q and q̇ stay the filter's (a torque's error on real
+recordings is almost all q̈'s; a q̇ of the filter's kernel made the simulated mocap sensor's
+finger torques 2 x worse through the arm's velocities); q̈ of the rule's joints is the
+blend of the model's and the practice filter's (practice_blend.py: the weight measured per
+joint against the practice), once the filter's ring holds the kernel's span, faded in (and
+out, when a joint leaves the rule) linearly over FADE_S so that q̈ does not jump; a restart
+(a reset, a discontinuity) drops them at once, as the model restarts there too.
+
+`PracticeOutput` is a mixin of KalmanCA: it reads _pfir, _pblend, _pf_use, _pf_w, _out,
+_dt, psd, _r, _floor, noise_estimator and writes the output's q̈ row.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import practice_lag
+from .noise_belief import COLOURED_RATIO, EXACT_WHITE
+
+#: seconds over which a joint's q̈ moves between the model's and the blend's
+FADE_S = 0.1
+#: the practice's band (Hz) the filter's kernel estimates (benchmarks/practice_fir_design.py)
+BAND_HZ = 6.0
+
+
+class PracticeOutput:
+    """Mixin of KalmanCA: the practice filter's joints and their q̈; see above."""
+
+    def practice_filter_weight(self) -> np.ndarray:
+        """(n,) each joint's share of the practice filter's blend in the q̈ output (0: the
+        model's q̈; 1: the blend of practice_blend.py), copy; zeros without the filter."""
+        return np.zeros(self.n) if self._pfir is None else self._pf_w.copy()
+
+    def practice_filter_variance(self) -> np.ndarray | None:
+        """(n,) the blended q̈'s error variance now ((rad/s²)², practice_blend.error_variance:
+        the σ's q̈ variance on the filter's joints); None without the filter."""
+        if self._pfir is None:
+            return None
+        return self._pblend.error_variance()
+
+    def _practice_filter_joints(self) -> None:
+        ne = self.noise_estimator
+        use, was = self._pf_use, self._pf_was
+        if not self.noise_known(False) or not ne.white_evaluations:
+            use.fill(False)
+            return
+        dt = ne.period_s or self._dt
+        self._pfir.configure(dt)
+        self._pblend.configure(dt)
+        self._pblend.update()
+        white = ne.white(self._tmp)
+        np.greater(white, EXACT_WHITE * self._floor, out=use)
+        wide = self.psd / (self._r**2 * dt) > (2.0 * math.pi * BAND_HZ) ** 6
+        coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
+        use &= wide | coloured
+        np.copyto(was, use)
+
+    def _practice_filter_output(self, q: np.ndarray) -> None:
+        """q̈ of the rule's joints: the blend of the model's and the practice filter's; every
+        sample's two q̈ estimates into the blend's window. q: the sample's positions (the
+        gate's prediction for a held joint)."""
+        pf = self._pfir
+        w = self._pf_w
+        qdd = self._out[2]
+        if not pf.ready:  # restarted: the model restarts too, its output is the one there is
+            w.fill(0.0)
+            self._pf_fading = False
+            return
+        f = pf.estimate()
+        self._pblend.add(q, qdd, f)
+        target = self._pf_use
+        done = np.array_equal(w, target)
+        if not done:  # fading: towards 1 on the rule's joints, 0 elsewhere
+            w += np.where(target, self._dt / FADE_S, -self._dt / FADE_S)
+            np.clip(w, 0.0, 1.0, out=w)
+        self._pf_fading = not done
+        if not w.any():
+            return
+        # the blend f + beta (k - f) = k + (1 - beta)(f - k), then faded: k + w (blend - k)
+        f -= qdd
+        f *= self._pblend.share
+        if done:
+            np.add(qdd, f, out=qdd, where=target)
+        else:
+            f *= w
+            qdd += f
