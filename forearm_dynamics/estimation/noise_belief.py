@@ -112,8 +112,7 @@ class NoiseBelief:
             # samples, rather than stay unarmed and let every jump ring through the filter
             ne.white(self._r_gate)
             np.maximum(self._r_gate, self._floor, out=self._r_gate)
-            for g in self._groups:
-                g.still = False  # the innovation stds again at the next step
+            self._innovation_std()  # the gate's stds with this level (the gains stand)
             self._armed = True
         if vel and self._fixed_rv is None and ne.velocity_ready:
             ne.velocity(self._rv)

@@ -42,6 +42,8 @@ PRIOR_S = 0.5
 DISAGREE_S = 0.1
 #: the share of the long-run measured error in the σ's q̈ variance (error_variance)
 LONG_SHARE = 0.3
+#: before the data, the blend's error variance over the disagreement (error_variance)
+PRIOR_RATIO = 1.0
 PERMANENT = True
 
 
@@ -238,11 +240,11 @@ class PracticeBlend:
         m = self._evals
         w = m / (m + self._prior_evals) if m else 0.0
         ratio *= w
-        ratio += 1.0 - w
+        ratio += (1.0 - w) * PRIOR_RATIO
         out = ratio * self.disagreement
         out *= 1.0 - LONG_SHARE
         res *= w
-        res += (1.0 - w) * self.disagreement
+        res += (1.0 - w) * PRIOR_RATIO * self.disagreement
         res *= LONG_SHARE
         out += res
         return out
