@@ -16,7 +16,10 @@ Sections (each states the load average; 2 cores):
   movements (real processes, loopback DDS): muscle_forces received (unique stamps) vs
   samples sent (lost), muscle_node's own callback time and QP time from its /diagnostics
   (median over the 1 s periods of their p50/p99), muscle_forces latency (receive time - the
-  joint_states stamp), joint_torques latency in the same run.
+  joint_states stamp), joint_torques latency in the same run. After the publisher ends the
+  chain waits while muscle_node still works (its own input queue, muscle_backlog.py; at most
+  DRAIN_WAIT_S): a late answer counts as answered, with its latency (`--no-drain-wait`: 1 s,
+  as before). `--muscle-args backlog_limit:=0` runs the node without its own queue.
 - `torque_path`: the same replay through null_echo_node and torque_node alone (the torque
   benchmark's variants): the torque node's latency p50 as a ratio to null_echo_node's, without
   and (chain) with muscle_node subscribed: "torque-path latency unchanged".
@@ -135,15 +138,46 @@ def _diag_stats(diag: list[dict], t0: float, t1: float) -> dict:
             out[key + "_worst_period"] = float(vals.max())
     last = rows[-1]
     for key in ("reserve_use_total", "infeasible_total", "solver_failed_total", "rejected_total",
-                "received_total", "processed_total"):
+                "received_total", "processed_total", "backlog_max_samples_total",
+                "drained_total", "backlog_dropped_total", "input_gaps_total"):
         if key in last:
             out[key] = int(last[key])
     return out
 
 
-def run_chain(movements: list[int], domain: int, work: Path, start_delay: float = 5.0) -> dict:
+#: after the publisher ends, how long the chain waits at most for muscle_node to answer what
+#: it still holds (its own input queue: muscle_backlog.py): an answer seconds late is late
+#: (its latency is reported), not lost
+DRAIN_WAIT_S = 300.0
+CORES = os.cpu_count() or 1
+
+
+def _wait_while_busy(pid: int, limit_s: float, idle_cpu: float = 0.05) -> float:
+    """Wait until process pid uses < idle_cpu of a core over 2 s while the machine had a
+    quarter of a core to spare (its backlog answered, not starved: at nice 10 beside busy
+    processes it gets a few % and is still working) or limit_s passed; returns the seconds
+    waited."""
+    from benchmarks.procstat import machine_busy, proc_stat
+
+    t0 = time.time()
+    last, busy = proc_stat(pid), machine_busy()
+    while last is not None and time.time() - t0 < limit_s:
+        time.sleep(2.0)
+        now, busy_now = proc_stat(pid), machine_busy()
+        if now is None:
+            break
+        spare = busy is None or busy_now is None or (busy_now - busy) < CORES * 2.0 - 0.5
+        if now.cpu_s - last.cpu_s < idle_cpu * 2.0 and spare:
+            break
+        last, busy = now, busy_now
+    return time.time() - t0
+
+
+def run_chain(movements: list[int], domain: int, work: Path, start_delay: float = 5.0,
+              muscle_args: tuple[str, ...] = (), drain_wait: bool = True) -> dict:
     """trajectory_publisher -> torque_node -> muscle_node -> receiver (muscle_forces; also
-    joint_torques)."""
+    joint_torques). muscle_args: extra -p assignments for muscle_node; drain_wait: after the
+    publisher ends, wait while muscle_node still works (DRAIN_WAIT_S at most)."""
     logs = work / "chain"
     logs.mkdir(parents=True, exist_ok=True)
     env = ros_env(domain, logs)
@@ -152,7 +186,10 @@ def run_chain(movements: list[int], domain: int, work: Path, start_delay: float 
     try:
         torque = Child.script("torque_node", ["-p", "diagnostics_period:=1.0"], env, logs)
         children.append(torque)
-        muscle = Child.script("muscle_node", ["-p", "diagnostics_period:=1.0"], env, logs)
+        margs = ["-p", "diagnostics_period:=1.0"]
+        for a in muscle_args:
+            margs += ["-p", a]
+        muscle = Child.script("muscle_node", margs, env, logs)
         children.append(muscle)
         rx = Child.module("receiver", "benchmarks.receiver",
                           ["--topic", "muscle_forces", "--out", str(rx_path), "--diag-prefix",
@@ -173,7 +210,9 @@ def run_chain(movements: list[int], domain: int, work: Path, start_delay: float 
             code = pub.wait(start_delay + 1.5 * len(movements) * 3 + 60)
             if code != 0:
                 raise RuntimeError(f"trajectory_publisher exited {code}:\n{pub.text()[-2000:]}")
+            pub_ended = time.time()
             time.sleep(1.0)  # the last answers in flight
+            drain_s = _wait_while_busy(muscle.pid, DRAIN_WAIT_S) if drain_wait else 0.0
             sampler.sample()
         codes = {c.name: c.stop() for c in reversed(children)}
     finally:
@@ -188,6 +227,11 @@ def run_chain(movements: list[int], domain: int, work: Path, start_delay: float 
     res.pop("callback_us", None)
     t0, t1 = data["recv_ns"][0] / 1e9, data["recv_ns"][-1] / 1e9
     tq_lat = (data["also_recv_ns"] - data["also_stamp_ns"]) / 1e6
+    lat = (data["recv_ns"] - data["stamp_ns"]) / 1e9
+    res.update({"muscle_args": list(muscle_args),
+                "waited_after_publisher_s": round(drain_s + 1.0, 1),
+                "answered_after_publisher_ended": int((data["recv_ns"] / 1e9 > pub_ended).sum()),
+                "muscle_forces_latency_s_max": float(lat.max()) if len(lat) else None})
     res.update({"expected": expected, "sent": sent, "exit_codes": codes,
                 "muscle_node_diagnostics": _diag_stats(diag, t0, t1),
                 "joint_torques": {"unique": int(np.unique(data["also_stamp_ns"]).size),
@@ -246,6 +290,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="5 movements instead of 65")
     ap.add_argument("--sections", default="solve,chain,torque_path,opensim")
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID") or 0) or 76)
+    ap.add_argument("--muscle-args", default="",
+                    help="comma-separated -p assignments for the chain's muscle_node, e.g. "
+                         "backlog_limit:=0 (no own input queue: the node before it)")
+    ap.add_argument("--no-drain-wait", action="store_true",
+                    help="stop the chain 1 s after the publisher (the benchmark before the "
+                         "node had its own input queue) instead of waiting while muscle_node "
+                         "still answers")
     args = ap.parse_args(argv)
     sections = set(args.sections.split(","))
     movements = [m.id for m in movement_library()]
@@ -273,7 +324,9 @@ def main(argv: list[str] | None = None) -> int:
         lease = claim_domain_arg(ap, args.domain, "benchmarks.muscle_node")
         with tempfile.TemporaryDirectory(prefix="bench_muscle_") as tmp:
             out["domain_id"] = lease.domain
-            chain = run_chain(movements, out["domain_id"], Path(tmp))
+            chain = run_chain(movements, out["domain_id"], Path(tmp),
+                              muscle_args=tuple(a for a in args.muscle_args.split(",") if a),
+                              drain_wait=not args.no_drain_wait)
             out["chain"] = chain
             print(json.dumps({k: chain[k] for k in ("sent", "unique", "lost",
                                                     "muscle_node_diagnostics")}, indent=1),

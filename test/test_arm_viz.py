@@ -19,8 +19,10 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from forearm_dynamics import JOINT_NAMES, build_model
+from forearm_dynamics.muscles import load_muscle_model
 from forearm_dynamics.nodes.common import latched_qos, stream_qos
 from forearm_dynamics.viz import ArmScene, MarkerMaker, TorqueColours
+from forearm_dynamics.viz.colors import viridis
 
 pytestmark = pytest.mark.ros
 
@@ -214,6 +216,76 @@ def test_without_a_torque_node_its_own_model_is_drawn_and_follows_its_parameters
         peer.spin_for(0.5)
         assert viz.wait_for_output("not drawing joint_torques", 10), viz.output()
         assert drawn(build_model("segmented", "female_5", side="left"), sent)
+    finally:
+        peer.close()
+        assert viz.stop() == 0, viz.output()[-2000:]
+    assert "Traceback" not in viz.output()
+
+
+def test_the_forearm_takes_its_strongest_muscles_colour_while_muscle_forces_keep_up():
+    """issue 31 item 4: with muscle_forces of the same stamps as the torques, the forearm's
+    links are viridis of the strongest forearm muscle's activation (RI2, a hand muscle, is
+    higher and ignored) and a label names it; with muscle_forces 2 s behind the torques the
+    forearm is back in its torque colours and no label is drawn (a stale label would lie)."""
+    viz = rosproc.start("arm_viz", "-p", "config_topic:=''")
+    peer = rosproc.Peer("viz_muscles")
+    try:
+        node = peer.node
+        tpub = node.create_publisher(JointState, "joint_torques", stream_qos(100))
+        mpub = node.create_publisher(JointState, "muscle_forces", stream_qos(100))
+        arrays: list[MarkerArray] = []
+        node.create_subscription(MarkerArray, "arm_markers", arrays.append, stream_qos(100))
+        assert peer.spin_until(lambda: tpub.get_subscription_count() > 0
+                               and mpub.get_subscription_count() > 0, rosproc.STARTUP_S), \
+            viz.output()
+        mm = load_muscle_model()
+        act = np.full(mm.n, 0.01)
+        act[mm.names.index("RI2")] = 0.9
+        act[mm.names.index("ECRB")] = 0.42
+        arm = build_model("segmented", 50)
+        sent: dict[int, JointState] = {}
+
+        def send(k: int, skew_ns: int) -> None:
+            t = 2000 * 10**9 + k * 20_000_000
+            m = JointState(name=list(JOINT_NAMES))
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(t, 10**9)
+            m.position = RNG.uniform(-0.2, 0.2, 20).tolist()
+            m.effort = RNG.normal(0, 0.5, 20).tolist()
+            f = JointState(name=list(mm.names), position=act.tolist())
+            f.header.stamp.sec, f.header.stamp.nanosec = divmod(t + skew_ns, 10**9)
+            mpub.publish(f)  # the muscles first: arm_viz draws on its next tick
+            tpub.publish(m)
+            sent[t] = m
+
+        def newest(k0: int, skew_ns: int, seconds: float = 30.0) -> MarkerArray:
+            """Send until an array drawn from torques sent from k0 on arrives; that array."""
+            k, deadline = k0, time.monotonic() + seconds
+            while time.monotonic() < deadline:
+                send(k, skew_ns)
+                k += 1
+                peer.spin_for(0.05)
+                for a in reversed(arrays):
+                    s = a.markers[-1].header.stamp
+                    t = s.sec * 10**9 + s.nanosec
+                    if t in sent and t >= 2000 * 10**9 + k0 * 20_000_000 + 100_000_000:
+                        return a
+            raise AssertionError(f"no array in {seconds} s\n{viz.output()[-2000:]}")
+
+        forearm = {"forearm_proximal", "forearm_distal"}
+        a = newest(0, 0)
+        label = [m for m in a.markers if m.ns == "muscle/strongest"]
+        assert len(label) == 1 and label[0].text == "ECRB 0.42", [m.text for m in label]
+        for m in a.markers:
+            if m.ns in forearm:
+                np.testing.assert_allclose([m.color.r, m.color.g, m.color.b], viridis(0.42),
+                                           atol=1e-6)
+        b = newest(1000, -2 * 10**9)  # muscle_forces 2 s behind: not drawn
+        assert not [m for m in b.markers if m.ns == "muscle/strongest"]
+        s = b.markers[-1].header.stamp
+        plain = _expected(arm, sent[s.sec * 10**9 + s.nanosec])
+        shapes = [m for m in b.markers if m.action == Marker.ADD]
+        for m, c in zip(shapes, plain.rgba):
+            np.testing.assert_allclose([m.color.r, m.color.g, m.color.b, m.color.a], c, atol=1e-6)
     finally:
         peer.close()
         assert viz.stop() == 0, viz.output()[-2000:]

@@ -5,7 +5,9 @@ Bounds and why:
 - torque balance 1e-6 N·m: an equality constraint of the QP, solved to daqp's primal
   tolerance (1e-6 on normalised activations, far tighter in N·m here);
 - surrogate vs MuJoCo's own geometry on held-out postures: the RMS the fit script recorded
-  for each pair (+ 0.2 mm for the new sample) and 1.5 mm RMS for every pair inside the
+  for each pair (+ 0.2 mm for the new sample), against the fit's target (the source, its
+  wrapping jumps past its own joint limits repaired: wrap_repair.py) and against the raw
+  source where the repair changed nothing, and 1.5 mm RMS for every pair inside the
   library's movement box; the file's full-range errors are reported in docs/muscles.md;
 - moment-arm sign vs the source (held-out uniform and box-face postures): the source's sign
   wherever |r| > 1 mm or the pair is one-signed in the source (> 0.1 mm), inside MyoArm's
@@ -116,23 +118,71 @@ def test_bad_posture_names_the_joint(mm):
 
 # ---- geometry ---------------------------------------------------------------------------
 
+def target(ref, key: str = ""):
+    """The fit's target at the held-out postures of set `key` ("", "_box", "_edge"): the raw
+    source with the rows the wrapping repair changed replaced (fit.write_heldout); and the
+    (posture, muscle) mask of those rows."""
+    R = ref[f"moment_arm{key}"].astype(float)
+    rows = ref[f"repaired{key}"]
+    mask = np.zeros(R.shape[:2], bool)
+    mask[rows[:, 0], rows[:, 1]] = True
+    R[mask] = ref[f"repaired{key}_moment_arm"]
+    L = ref["length"].astype(float) if not key else None
+    if L is not None:
+        L[mask] = ref["repaired_length"]
+    return L, R, mask
+
+
 def test_surrogate_matches_the_source_geometry_on_held_out_postures(mm):
-    """MuJoCo MyoArm's own lengths and moment arms (ten_J) at postures the fit never saw."""
+    """MuJoCo MyoArm's own lengths and moment arms (ten_J) at postures the fit never saw:
+    against the fit's target (wrapping jumps past MyoArm's limits repaired), and against the
+    raw source on the postures the repair left alone."""
     ref = np.load(HELDOUT)
-    q, L, R = ref["q"], ref["length"], ref["moment_arm"]
+    q, R_raw = ref["q"], ref["moment_arm"]
+    L, R, repaired = target(ref)
     assert list(ref["names"]) == list(mm.names)
     Rs, Ls = mm.moment_arms(q), mm.lengths(q)
     doc = json.loads(DEFAULT_FILE.read_text())
-    worst = []
+    worst, worst_raw = [], []
     for i, mus in enumerate(doc["muscles"]):
+        clean = ~repaired[:, i]
         for jn in mus["spans"]:
             rms = np.sqrt(np.mean((Rs[:, i, J[jn]] - R[:, i, J[jn]]) ** 2)) * 1e3
             worst.append((rms - mus["fit"]["moment_arm_rms_mm"][jn], mus["name"], jn))
+            raw = np.sqrt(np.mean((Rs[clean, i, J[jn]] - R_raw[clean, i, J[jn]]) ** 2)) * 1e3
+            worst_raw.append((raw - mus["fit"]["moment_arm_rms_unrepaired_mm"][jn],
+                              mus["name"], jn))
         lr = np.sqrt(np.mean((Ls[:, i] - L[:, i]) ** 2)) * 1e3
         assert lr <= mus["fit"]["length_rms_mm"] + 0.2, mus["name"]
     assert max(worst)[0] <= 0.2, max(worst)
+    assert max(worst_raw)[0] <= 0.2, max(worst_raw)
     # nowhere a moment arm where the source has none
     assert np.all(Rs[np.abs(R).max(axis=0)[None].repeat(len(q), 0) == 0] == 0)
+
+
+def test_the_wrapping_repair_is_past_the_source_limits_and_keeps_fds_a_flexor(mm):
+    """The repair (wrap_repair.py) changed only postures past MyoArm's own joint limits, and
+    there it replaced an artefact: MyoArm's FDS path jumps across a wrap surface past ~-65°
+    of wrist extension and its wrist moment arm turns extensor (-16.8 mm), which FDS is at no
+    posture; the fit's target and the surrogate keep it a flexor there."""
+    ref = np.load(HELDOUT)
+    fds = [mm.names.index(n) for n in ("FDS2", "FDS3")]
+    seen = 0
+    for key, qkey in (("", "q"), ("_box", "q_box"), ("_edge", "q_edge")):
+        q = ref[qkey]
+        _, R, repaired = target(ref, key)
+        past = ((q < ref["source_lo"] - 1e-9) | (q > ref["source_hi"] + 1e-9)).any(axis=1)
+        assert not repaired[~past].any(), key  # inside the source's limits: its geometry
+        R_raw = ref["moment_arm" + key]
+        Rs = mm.moment_arms(q)
+        for i in fds:
+            rows = repaired[:, i]
+            seen += int(rows.sum())
+            wf = J["wrist_flexion"]
+            assert (R[rows, i, wf] > 0).all() and (Rs[rows, i, wf] > 0).all(), (key, i)
+            if rows.any():  # what was repaired: the flip
+                assert (R_raw[rows, i, wf] < 0).any(), (key, i)
+    assert seen >= 5, seen  # the held-out sets reach the artefact (fit.write_heldout)
 
 
 def test_surrogate_inside_the_movement_box_is_within_1_5_mm(mm):
@@ -149,13 +199,15 @@ def test_surrogate_keeps_the_source_sign_out_to_the_range_edges(mm):
     inside MyoArm's own joint limits: wherever the source's moment arm exceeds 1 mm, and
     wherever a pair the source keeps one-signed exceeds 0.1 mm, the surrogate has its sign;
     waived only within 10° of a wrapping jump the fit recorded for that pair (the source's
-    sign flips in a step there: RI2 at index MCP 9°). Past MyoArm's limits (our wrist
-    flexes to 80°, MyoArm's to 45°) sign errors remain in 13 wrist/finger pairs of the
+    sign flips in a step there: RI2 at index MCP 9°). The source is the fit's target: its
+    wrapping jumps past its own limits repaired (wrap_repair.py; FDS2 and FDS3 stay wrist
+    flexors past -65°, where MyoArm's path turns them extensors). Past MyoArm's limits (our
+    wrist flexes to 80°, MyoArm's to 45°) sign errors remain in 4 wrist/finger pairs of the
     multi-joint muscles (docs/muscles.md; `python -m forearm_dynamics.muscles.fit_check`);
     every pair crossing the elbow or pro/sup is checked over our whole ranges."""
     ref = np.load(HELDOUT)
     q = np.concatenate([ref["q"], ref["q_edge"]])
-    R = np.concatenate([ref["moment_arm"], ref["moment_arm_edge"]]).astype(float)
+    R = np.concatenate([target(ref)[1], target(ref, "_edge")[1]])  # the fit's target
     Rs = mm.moment_arms(q)
     inside_joint = (q >= ref["source_lo"] - 1e-9) & (q <= ref["source_hi"] + 1e-9)
     doc = json.loads(DEFAULT_FILE.read_text())

@@ -16,6 +16,7 @@ from forearm_dynamics.nodes.arm_markers import marker_array
 from forearm_dynamics.viz import ArmScene, MarkerMaker, TorqueColours
 from forearm_dynamics.viz.colors import FULL_SCALE_NM, VIRIDIS, library_peaks, viridis
 from forearm_dynamics.viz.marker_cdr import marker_array_cdr
+from forearm_dynamics.viz.muscles import strongest
 
 pytestmark = pytest.mark.unit
 
@@ -127,6 +128,44 @@ def test_the_cdr_bytes_are_rclpys_message():
             theirs = serialize_message(ref)
             assert len(ours) == len(theirs)
             assert deserialize_message(ours, MarkerArray) == deserialize_message(theirs, MarkerArray)
+
+
+@pytest.mark.parametrize("kind", ["segmented", "anatomical", "solid"])
+def test_the_strongest_muscle_colours_the_forearm_and_is_labelled(kind):
+    """issue 31 item 4: the forearm's links (the elbow's and pro/sup's) take viridis of the
+    strongest forearm muscle's activation, every other link keeps its torque colour, and a
+    label names the muscle; the CDR bytes are rclpy's message with the label (TEXT_VIEW_FACING)
+    and change with it."""
+    arm = build_model(kind, 50)
+    scene = ArmScene(arm)
+    maker = MarkerMaker(scene, TorqueColours(arm.joint_names), arrows=True)
+    rng = np.random.default_rng(5)
+    q, tau = rng.uniform(-0.5, 0.5, arm.nv), rng.normal(0, 1, arm.nv)
+    names = ("PT", "RI2", "FCR", "SUP")
+    pick = strongest(names, [0.2, 0.9, 0.31, np.nan])  # RI2 is a hand muscle: not the forearm's
+    assert pick == ("FCR", 0.31)
+    plain, f = maker.frame(q, tau), maker.frame(q, tau, pick)
+    forearm = [i for i, s in enumerate(scene.shapes)
+               if s.joint_index is not None
+               and scene.joint_names[s.joint_index] in ("elbow_flexion", "pro_sup")]
+    assert forearm, kind
+    np.testing.assert_allclose(f.rgba[forearm, :3], np.repeat(viridis(0.31)[None], len(forearm), 0))
+    rest = [i for i in range(len(f.ns)) if i not in forearm]
+    np.testing.assert_array_equal(f.rgba[rest], plain.rgba[rest])
+    assert f.text == "FCR 0.31" and plain.text is None
+    stamp = 1_700_000_000 * 10**9 + 5
+    for frame in (f, maker.frame(q, tau, ("ECRB", 0.05))):
+        ours = marker_array_cdr(frame, scene.root_frame, stamp)
+        theirs = serialize_message(marker_array(frame, scene.root_frame, stamp))
+        assert len(ours) == len(theirs)
+        msg = deserialize_message(ours, MarkerArray)
+        assert msg == deserialize_message(theirs, MarkerArray)
+        label = [m for m in msg.markers if m.ns == "muscle/strongest"]
+        assert len(label) == 1 and label[0].text == frame.text and label[0].type == 9
+        assert label[0].lifetime.sec == 0 and label[0].lifetime.nanosec == 500_000_000
+        np.testing.assert_allclose([label[0].pose.position.x, label[0].pose.position.y,
+                                    label[0].pose.position.z], frame.text_position)
+    assert strongest(("RI2", "OP"), [0.5, 0.5]) is None  # no forearm muscle in the message
 
 
 def test_colour_scale_is_viridis_of_torque_over_the_group_full_scale():

@@ -272,3 +272,35 @@ class TorqueReader:
             raise ValueError(f"joint_torques lacks the model's joint(s) {missing[:3]}")
         cols = [index[n] for n in joint_names]
         return stamp, np.asarray(pos, float)[cols], np.asarray(eff, float)[cols]
+
+
+class MuscleReader:
+    """The newest muscle_forces message (muscle_node's output: name = muscles, position =
+    activation), kept as bytes and decoded on demand (arm_viz: 30 Hz of a 1 kHz topic)."""
+
+    def __init__(self):
+        self.data: bytes | None = None
+        self.seq = 0
+        self._layout = None
+
+    def keep(self, data: bytes) -> None:
+        self.data = data
+        self.seq += 1
+
+    def decode(self) -> tuple[int, tuple[str, ...], np.ndarray]:
+        """(stamp ns, names, activations) of the kept message."""
+        data = self.data
+        lay = self._layout
+        if lay is None or not lay.matches(data):
+            try:
+                lay = parse_layout(data)
+            except NotMine:
+                lay = None
+            self._layout = lay
+        if lay is not None:
+            sec, nsec = np.frombuffer(data, "<i4", 1, 4)[0], np.frombuffer(data, "<u4", 1, 8)[0]
+            return (int(sec) * 1_000_000_000 + int(nsec), lay.names,
+                    np.asarray(lay.array(data, "position"), float))
+        m = deserialize(data, "JointState")
+        return (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, tuple(m.name),
+                np.asarray(m.position, float))

@@ -38,6 +38,10 @@ our BSD-3 package can carry (Apache-2.0; MoBL-ARMS is non-commercial). What the 
    with the moment arm's integral; a step off by more than JUMP_TOL is a jump (the path
    switched sides of a wrap). Fitting samples whose residual is an outlier (> OUTLIER_K ×
    robust σ and > 1 mm) are excluded and refitted (at most 2 % per muscle); both are reported.
+   Past the source's own joint limits a jump is repaired, posture by posture, by one rule
+   for every pair (wrap_repair.py: the geometry before the jump, continued): the fit's
+   target is the source with those artefacts repaired; each pair's error is reported
+   against that target, and against the raw source where the rule changed nothing.
 6. Errors per (muscle, joint) pair on held-out samples (RMS, max, sign errors) are written
    into the file; `--docs` writes them into docs/muscles.md (fit_report.py).
 """
@@ -48,13 +52,12 @@ import argparse
 import json
 import math
 import time
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..description import JOINT_NAMES, load_description
+from ..description import JOINT_NAMES
 from .fit_core import (
     JUMP_WAIVE_DEG,
     MAX_DEGREE,
@@ -68,47 +71,16 @@ from .fit_core import (
     fit_muscle,
 )
 from .fit_report import write_docs
-
-#: our joint -> (MyoArm joint, sign): our angle = sign * MyoArm's angle.
-JOINT_MAP: dict[str, tuple[str, int]] = {
-    "elbow_flexion": ("elbow_flexion_r", 1),
-    "pro_sup": ("pro_sup_r", 1),  # pronation positive in both (PT, PQ positive)
-    "wrist_flexion": ("flexion_r", 1),
-    "wrist_deviation": ("deviation_r", -1),  # MyoArm: radial positive (ECU, FCU negative)
-    "thumb_cmc_flexion": ("cmc_flexion", -1),  # MyoArm: extension positive (EPB, EPL +)
-    "thumb_cmc_abduction": ("cmc_abduction", 1),  # APL positive, EPL negative
-    "thumb_mcp_flexion": ("mp_flexion_r", -1),  # MyoArm: FPL negative
-    "thumb_ip_flexion": ("ip_flexion_r", -1),
-    "index_mcp_flexion": ("mcp2_flexion_r", 1),
-    "index_pip_flexion": ("pm2_flexion_r", 1),
-    "index_dip_flexion": ("md2_flexion_r", 1),
-    "middle_mcp_flexion": ("mcp3_flexion_r", 1),
-    "middle_pip_flexion": ("pm3_flexion_r", 1),
-    "middle_dip_flexion": ("md3_flexion", 1),
-    "ring_mcp_flexion": ("mcp4_flexion_r", 1),
-    "ring_pip_flexion": ("pm4_flexion", 1),
-    "ring_dip_flexion": ("md4_flexion_r", 1),
-    "little_mcp_flexion": ("mcp5_flexion_r", 1),
-    "little_pip_flexion": ("pm5_flexion_r", 1),
-    "little_dip_flexion": ("md5_flexion_r", 1),
-}
-
-#: Anatomical actions the mapping must reproduce (muscle, our joint, sign of moment arm).
-SIGN_CHECKS = (
-    ("BRA", "elbow_flexion", 1), ("TRIlat", "elbow_flexion", -1),
-    ("PT", "pro_sup", 1), ("PQ", "pro_sup", 1), ("SUP", "pro_sup", -1),
-    ("FCR", "wrist_flexion", 1), ("ECRB", "wrist_flexion", -1),
-    ("ECU", "wrist_deviation", 1), ("FCU", "wrist_deviation", 1), ("ECRL", "wrist_deviation", -1),
-    ("FPL", "thumb_ip_flexion", 1), ("EPL", "thumb_ip_flexion", -1),
-    ("FPL", "thumb_mcp_flexion", 1), ("EPB", "thumb_mcp_flexion", -1),
-    ("OP", "thumb_cmc_flexion", 1), ("EPB", "thumb_cmc_flexion", -1),
-    ("EPL", "thumb_cmc_abduction", -1),  # APL: ~0 mm mid-range, sign not anatomical proof
-    ("FDP2", "index_dip_flexion", 1), ("EDC3", "middle_mcp_flexion", -1),
+from .myoarm import (  # noqa: F401  (re-exported: fit.MyoArm, fit.joint_box, ...)
+    JOINT_MAP,
+    SHOULDER_ONLY,
+    SIGN_CHECKS,
+    MyoArm,
+    check_signs,
+    find_spans,
+    joint_box,
 )
-
-#: Shoulder-only muscles of MyoArm: they cross no joint of ours.
-SHOULDER_ONLY = ("DELT1", "DELT2", "DELT3", "SUPSP", "INFSP", "SUBSC", "TMIN", "TMAJ",
-                 "PECM1", "PECM2", "PECM3", "LAT1", "LAT2", "LAT3", "CORB")
+from .wrap_repair import REFINE_DEG, STEP_DEG, WRAP_REPAIR_RULE, Repairer
 
 JUMP_TOL = 5e-4  # m: length step not explained by the moment arm over a 1° step
 N_FIT = 20000
@@ -128,102 +100,6 @@ class FitSizes:
     n_edge_base: int | None = None
     jump_bases: int = 6
     n_envelope: int = 2000
-
-
-class MyoArm:
-    """MuJoCo MyoArm at our joints: lengths and moment arms per muscle (tendon)."""
-
-    def __init__(self, xml: Path | None = None):
-        import mujoco
-
-        if xml is None:
-            import myo_sim
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                self.m = myo_sim.load_model("myoarm_r")
-            self.version = {"myo_sim": myo_sim.__version__, "mujoco": mujoco.__version__}
-        else:  # a user's MuJoCo model with MyoArm's joint and muscle names
-            self.m = mujoco.MjModel.from_xml_path(str(xml))
-            self.version = {"file": str(xml), "mujoco": mujoco.__version__}
-        self.mujoco = mujoco
-        m = self.m
-        self.d = mujoco.MjData(m)
-        jn = [m.joint(j).name for j in range(m.njnt)]
-        self.qadr = np.array([m.jnt_qposadr[jn.index(JOINT_MAP[n][0])] for n in JOINT_NAMES])
-        self.dofadr = np.array([m.jnt_dofadr[jn.index(JOINT_MAP[n][0])] for n in JOINT_NAMES])
-        self.sign = np.array([JOINT_MAP[n][1] for n in JOINT_NAMES], float)
-        names = [m.actuator(a).name for a in range(m.nu)]
-        self.actuators = [a for a, n in enumerate(names) if n not in SHOULDER_ONLY]
-        self.names = [names[a] for a in self.actuators]
-        self.tendons = np.array([m.actuator_trnid[a, 0] for a in self.actuators])
-        self._J = np.zeros((m.ntendon, m.nv))
-
-    def evaluate(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """q (N, 20) ours -> lengths (N, n) m, moment arms (N, n, 20) m (our signs)."""
-        mj, m, d = self.mujoco, self.m, self.d
-        q = np.atleast_2d(q)
-        L = np.empty((len(q), len(self.names)))
-        R = np.empty((len(q), len(self.names), 20))
-        for k, qk in enumerate(q):
-            d.qpos[:] = 0.0
-            d.qpos[self.qadr] = self.sign * qk
-            mj.mj_kinematics(m, d)
-            mj.mj_comPos(m, d)
-            mj.mj_tendon(m, d)
-            mj.mju_sparse2dense(self._J, d.ten_J, m.ten_J_rownnz, m.ten_J_rowadr, m.ten_J_colind)
-            L[k] = d.ten_length[self.tendons]
-            R[k] = -self._J[self.tendons][:, self.dofadr] * self.sign
-        return L, R
-
-    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """The source's own joint limits at our joints (rad, our signs): past them (our wrist
-        flexes to 80°, MyoArm's to 45°) its paths are geometry it was never built for."""
-        m = self.m
-        r = m.jnt_range[[m.jnt_qposadr.tolist().index(a) for a in self.qadr]] * self.sign[:, None]
-        return r.min(axis=1), r.max(axis=1)
-
-    def parameters(self, a_index: int) -> dict[str, float]:
-        m = self.m
-        a = self.actuators[a_index]
-        g = m.actuator_gainprm[a]
-        lo, hi = m.actuator_lengthrange[a]
-        l0 = (hi - lo) / (g[1] - g[0])
-        lts = lo - g[0] * l0
-        if lts < 0.0:  # a fibre longer than its whole path (PQ, OP, RI3): no tendon instead,
-            lts, l0 = 0.0, hi / g[1]  # the longest path puts the fibre at range[1]
-        return {
-            "max_isometric_force": float(g[2]),
-            "optimal_fiber_length": float(l0),
-            "tendon_slack_length": float(lts),
-            "pennation_at_optimal": 0.0,
-            "max_contraction_velocity": 10.0,
-        }
-
-
-def joint_box() -> tuple[np.ndarray, np.ndarray]:
-    """Our joints' ranges (rad, README table / config/model.yaml)."""
-    ranges = load_description().ranges
-    lo = np.array([ranges[n][0] for n in JOINT_NAMES], float)
-    hi = np.array([ranges[n][1] for n in JOINT_NAMES], float)
-    return lo, hi
-
-
-def find_spans(src: MyoArm, lo, hi, rng) -> list[list[int]]:
-    q = rng.uniform(lo, hi, size=(40, 20))
-    _, R = src.evaluate(q)
-    return [list(np.nonzero(np.abs(R[:, i, :]).max(axis=0) > 1e-7)[0]) for i in range(R.shape[1])]
-
-
-def check_signs(src: MyoArm, lo, hi) -> list[str]:
-    mid = 0.5 * (lo + hi)
-    _, R = src.evaluate(mid[None])
-    bad = []
-    for muscle, joint, sgn in SIGN_CHECKS:
-        r = R[0, src.names.index(muscle), JOINT_NAMES.index(joint)]
-        if np.sign(r) != sgn:
-            bad.append(f"{muscle} about {joint}: {r * 1e3:+.2f} mm, expected sign {sgn:+d}")
-    return bad
 
 
 def find_jumps(src: MyoArm, spans, lo, hi, rng, n_base: int = 6) -> list[dict]:
@@ -261,11 +137,14 @@ def movement_box() -> tuple[np.ndarray, np.ndarray]:
     return q.min(axis=0), q.max(axis=0)
 
 
-def envelope_errors(src, muscles, center, half, rng, n: int = 2000) -> None:
-    """Add each pair's RMS over the movements' box (held-out samples) to the fit record."""
+def envelope_errors(src, muscles, center, half, rng, n: int = 2000, fix=None) -> None:
+    """Add each pair's RMS over the movements' box (held-out samples) to the fit record
+    (against the fit's target: the source, its wrapping jumps past its limits repaired)."""
     lo, hi = movement_box()
     q = rng.uniform(lo, hi, size=(n, 20))
     L, R = src.evaluate(q)
+    if fix is not None:
+        L, R, _ = fix(q, L, R)
     x = np.clip((q - center) / half, -1, 1)
     for i, mus in enumerate(muscles):
         span = [JOINT_NAMES.index(j) for j in mus["spans"]]
@@ -281,26 +160,39 @@ def envelope_errors(src, muscles, center, half, rng, n: int = 2000) -> None:
 HELDOUT = Path(__file__).resolve().parents[2] / "test" / "data" / "muscles_myoarm_heldout.npz"
 
 
-def write_heldout(src: MyoArm, path: Path, rng, n: int = 120, n_edge: int = 6) -> None:
+def write_heldout(src: MyoArm, path: Path, rng, n: int = 120, n_edge: int = 6,
+                  fix=None) -> None:
     """The source's exact geometry at postures the fit never saw (test_muscles.py): n over
     our joints' ranges, n inside the library's movement box, and n_edge postures per face
-    of the range box (each joint at either edge: where a sign goes wrong first)."""
+    of the range box (each joint at either edge: where a sign goes wrong first). Beside the
+    raw source (`length`, `moment_arm`, ...): where the fit's target differs from it (its
+    wrapping jumps past the source's limits repaired, wrap_repair.py), as (posture, muscle)
+    rows `repaired*` and their target values `repaired*_length`, `repaired*_moment_arm`
+    (test_muscles.target() rebuilds the target arrays)."""
+    fix = fix if fix is not None else Repairer(src, JUMP_TOL)
     lo, hi = joint_box()
     q = rng.uniform(lo, hi, size=(n, 20))
     L, R = src.evaluate(q)
     blo, bhi = movement_box()
     qb = rng.uniform(blo, bhi, size=(n, 20))
-    _, Rb = src.evaluate(qb)
+    Lb, Rb = src.evaluate(qb)
     qe = np.repeat(rng.uniform(lo, hi, size=(n_edge, 20))[None], 40, axis=0)
     for j in range(20):
         qe[2 * j, :, j], qe[2 * j + 1, :, j] = lo[j], hi[j]
     qe = qe.reshape(-1, 20)
-    _, Re = src.evaluate(qe)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    Le, Re = src.evaluate(qe)
     f32 = np.float32  # 0.03 µm at 0.3 m: far below the errors compared
+    repaired = {}
+    for key, (qs, Ls, Rs) in {"": (q, L, R), "_box": (qb, Lb, Rb), "_edge": (qe, Le, Re)}.items():
+        Lr, Rr, m = fix(qs, Ls, Rs)
+        rows = np.argwhere(m)
+        repaired.update({f"repaired{key}": rows,
+                         f"repaired{key}_length": Lr[m].astype(f32),
+                         f"repaired{key}_moment_arm": Rr[m].astype(f32)})
+    path.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(path, names=np.array(src.names), q=q, length=L.astype(f32),
                         moment_arm=R.astype(f32), q_box=qb, moment_arm_box=Rb.astype(f32),
-                        q_edge=qe, moment_arm_edge=Re.astype(f32),
+                        q_edge=qe, moment_arm_edge=Re.astype(f32), **repaired,
                         source_lo=src.joint_limits()[0], source_hi=src.joint_limits()[1],
                         source=np.array(f"MyoArm myo_sim {src.version}; Apache-2.0"))
 
@@ -324,13 +216,16 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
     center, half = 0.5 * (hi + lo), 0.5 * (hi - lo)
     qf = rng.uniform(lo, hi, size=(sizes.n_fit, 20))
     qt = rng.uniform(lo, hi, size=(sizes.n_test, 20))
-    Lf, Rf = src.evaluate(qf)
-    Lt, Rt = src.evaluate(qt)
+    # the fit's target: the source, its wrapping jumps past its own limits repaired
+    fix = Repairer(src, JUMP_TOL)
+    Lf, Rf, mf = fix(qf, *src.evaluate(qf))
+    Lt_src, Rt_src = src.evaluate(qt)
+    Lt, Rt, mt = fix(qt, Lt_src, Rt_src)
     xf, xt = (qf - center) / half, (qt - center) / half
     qef, moved_f = edge_postures(qf[:sizes.n_edge_base], lo, hi, spans)  # fitted
     qet, moved_t = edge_postures(qt[:sizes.n_edge_base], lo, hi, spans)  # checked only
-    Lef, Ref = src.evaluate(qef)
-    Let, Ret = src.evaluate(qet)
+    Lef, Ref, mef = fix(qef, *src.evaluate(qef))
+    Let, Ret, met = fix(qet, *src.evaluate(qet))
     xef, xet = (qef - center) / half, (qet - center) / half
     jumps = find_jumps(src, spans, lo, hi, rng, sizes.jump_bases)
     muscles = []
@@ -346,6 +241,9 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                          (xef[uf], Lef[uf, i], Ref[uf, i]), (xet[ut], Let[ut, i], Ret[ut, i]),
                          {k: v for k, v in jx.items() if v}, width)
         joints = [JOINT_NAMES[j] for j in span]
+        # against the raw source: where the repair left it alone, and where it did not
+        err = design(xt[:, span], fit["exps"]) @ fit["coef"][:, 1:] - Rt_src[:, i][:, span]
+        clean = ~mt[:, i]
         muscles.append({
             "name": name,
             **src.parameters(i),
@@ -371,15 +269,24 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                 "pair_bases": {joints[k]: {"joints": [joints[j] for j in S], "degree": D}
                                for k, (S, D) in fit["pair_bases"].items()},
                 "jumps": sum(1 for jp in jumps if jp["muscle"] == name),
+                "repaired": {"fit": int(mf[:, i].sum() + mef[uf, i].sum()),
+                             "held_out": int(mt[:, i].sum()),
+                             "edge_held_out": int(met[ut, i].sum())},
+                "moment_arm_rms_unrepaired_mm": {
+                    jn: round(float(np.sqrt(np.mean(err[clean, k] ** 2))) * 1e3, 4)
+                    for k, jn in enumerate(joints)},
+                "moment_arm_rms_vs_artefact_mm": {
+                    jn: round(float(np.sqrt(np.mean(err[~clean, k] ** 2))) * 1e3, 4)
+                    for k, jn in enumerate(joints)} if (~clean).any() else {},
             },
         })
         print(f"{name:8s} deg {fit['degree']} K {len(fit['exps']):4d} "
               f"L {fit['rms'][0] * 1e3:.3f} mm  r max-RMS {fit['rms'][1:].max() * 1e3:.3f} mm "
               f"excl {fit['excluded']} sign viol {int(fit['sign_violations'].sum())} "
               f"constr {fit['sign_constraints']} pairs {fit['pair_bases']}", flush=True)
-    envelope_errors(src, muscles, center, half, rng, sizes.n_envelope)
+    envelope_errors(src, muscles, center, half, rng, sizes.n_envelope, fix)
     if heldout is not None:
-        write_heldout(src, heldout, np.random.default_rng(seed + 1000))
+        write_heldout(src, heldout, np.random.default_rng(seed + 1000), fix=fix)
     source = source if not own else {
         "name": "MyoSuite myo_sim MyoArm (myoarm_r), MuJoCo",
         "version": src.version,
@@ -415,6 +322,9 @@ def build(out: Path, seed: int = 0, heldout: Path | None = None,
                 "max_degree": MAX_DEGREE, "max_terms": MAX_TERMS,
                 "pair_degrees": list(PAIR_DEGREES), "opensim_max_terms": OPENSIM_MAX_TERMS,
                 "jump_tolerance_mm": JUMP_TOL * 1e3, "jumps": jumps[:200],
+                "wrap_repair": {"rule": WRAP_REPAIR_RULE, "applied": fix.limits is not None,
+                                "postures_evaluated": fix.evaluated,
+                                "step_deg": STEP_DEG, "refine_deg": REFINE_DEG},
                 "n_jumps": len(jumps), "seconds": round(time.perf_counter() - t0, 1)},
         "muscles": muscles,
     }

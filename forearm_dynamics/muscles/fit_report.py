@@ -36,12 +36,29 @@ def pairs_markdown(doc: dict) -> str:
         f"{np.median(full):.2f} mm | {np.percentile(full, 95):.2f} mm | "
         f"{worst[0][4]} {worst[0][5]} {worst[0][0]:.2f} |"),
     ]
+    raw = [(m["fit"]["moment_arm_rms_unrepaired_mm"][j], m["name"], j)
+           for m in doc["muscles"] if "moment_arm_rms_unrepaired_mm" in m["fit"]
+           for j in m["spans"]]
+    if raw:
+        rv = np.array([r[0] for r in raw])
+        rw = max(raw)
+        out.append(f"| the same, against the raw source where the repair changed nothing | "
+                   f"{int((rv <= 1.0).sum())} / {len(raw)} | {np.median(rv):.2f} mm | "
+                   f"{np.percentile(rv, 95):.2f} mm | {rw[1]} {rw[2]} {rw[0]:.2f} |")
     bw = max(rows, key=lambda r: r[2])
     out.append(f"| the library's movements' box | {int((box <= 1.0).sum())} / {len(rows)} | "
                f"{np.median(box):.2f} mm | {np.percentile(box, 95):.2f} mm | "
                f"{bw[4]} {bw[5]} {bw[2]:.2f} |")
     out += ["", "Pairs above 1 mm RMS over the full ranges (RMS / max mm): " + (", ".join(
         f"{n} {j} {r:.2f} / {mx:.1f}" for r, mx, _, _, n, j in worst if r > 1.0) or "none") + ".",
+        "Wrapping jumps past the source's own joint limits, repaired (wrap_repair.py; "
+        "held-out uniform postures repaired, and the surrogate against the raw source there, "
+        "RMS mm: the artefact's size): " + (", ".join(
+            f"{m['name']} {m['fit']['repaired']['held_out']} of {f['held_out']} ("
+            + ", ".join(f"{j} {v:.1f}" for j, v in
+                        m["fit"]["moment_arm_rms_vs_artefact_mm"].items() if v >= 1.0) + ")"
+            for m in doc["muscles"] if m["fit"].get("repaired", {}).get("held_out"))
+            or "none") + ".",
         "Sign errors (held-out postures where |r| > 1 mm, or a one-signed pair, and the "
         "surrogate has the other sign): " + ((", ".join(
             f"{n} {j} {v}" for _, _, _, v, n, j in rows if v) or "none") if recorded

@@ -11,7 +11,16 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..viz.markers import ARROW, ARROW_SCALE, MarkerFrame
+from ..viz.markers import (
+    ARROW,
+    ARROW_SCALE,
+    MUSCLE_NS,
+    MUSCLE_TEXT_HEIGHT,
+    MUSCLE_TEXT_LIFETIME,
+    MUSCLE_TEXT_RGBA,
+    TEXT,
+    MarkerFrame,
+)
 
 
 def stamp(ns: int) -> Time:
@@ -44,5 +53,15 @@ def marker_array(frame: MarkerFrame, frame_id: str, stamp_ns: int,
         k.scale.x, k.scale.y, k.scale.z = ARROW_SCALE
         k.color.r, k.color.g, k.color.b, k.color.a = (float(v) for v in frame.arrow_rgba[i])
         k.points = [Point(x=float(a[0]), y=float(a[1]), z=float(a[2])) for a in frame.arrows[i]]
+        out.append(k)
+    if frame.text is not None:
+        k = _marker(t, frame_id, MUSCLE_NS, TEXT)
+        p = k.pose.position
+        p.x, p.y, p.z = (float(v) for v in frame.text_position)
+        k.pose.orientation.w = 1.0
+        k.scale.z = MUSCLE_TEXT_HEIGHT
+        k.color.r, k.color.g, k.color.b, k.color.a = MUSCLE_TEXT_RGBA
+        k.text = frame.text
+        k.lifetime.sec, k.lifetime.nanosec = MUSCLE_TEXT_LIFETIME
         out.append(k)
     return MarkerArray(markers=out)

@@ -16,6 +16,12 @@ A separate process, so the 1 kHz torque path is untouched: the joint_torques sub
 only keeps the newest message's bytes (no decoding at 1 kHz); the timer decodes one, runs
 forward kinematics and publishes CDR bytes made by viz/marker_cdr.py.
 
+Muscles (issue 31): while muscle_node answers on `muscle_topic` (muscle_forces) within 0.5 s
+of the torques drawn, the forearm's links are coloured by the activation of its strongest
+forearm muscle instead of their joints' torques (viridis over 0..1), and a label
+"<muscle> <activation>" (TEXT_VIEW_FACING, ns muscle/strongest) is drawn beside them
+(viz/muscles.py).
+
 Bad input (a config that cannot be built, torques without the model's joints): one warning
 line naming it, and the node carries on with what it had.
 """
@@ -30,11 +36,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from ..codec.jointstate import TorqueReader
+from ..codec.jointstate import MuscleReader, TorqueReader
 from ..dynamics import ArmModel
 from ..model_config import model_from_config
 from ..viz import ArmScene, MarkerMaker, TorqueColours
 from ..viz.marker_cdr import marker_array_cdr
+from ..viz.muscles import MAX_SKEW_NS, strongest
 from .arm_viz_settings import LIVE_VIEW, MODEL_NAMES, SPECS, ArmVizSettings, own_model, view_values
 from .common import latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, init_node
@@ -63,6 +70,10 @@ class ArmVizNode(Node):
                                  stream_qos(1, reliable=False), raw=True)
         if s.config_topic:
             self.create_subscription(String, s.config_topic, self._on_config, latched_qos())
+        self._muscles = MuscleReader()
+        if s.muscle_topic:  # as the torques: the newest message's bytes, best effort
+            self.create_subscription(JointState, s.muscle_topic, self._muscles.keep,
+                                     stream_qos(1, reliable=False), raw=True)
         self.add_on_set_parameters_callback(self._on_set)
         self.create_timer(1.0 / s.rate_hz, self._tick)
         self.get_logger().info(
@@ -131,6 +142,19 @@ class ArmVizNode(Node):
             self._warned.add(key)
             self.get_logger().warning(text)
 
+    def _strongest(self, stamp: int) -> tuple[str, float] | None:
+        """The forearm's strongest muscle at about `stamp` (muscle_forces), or None."""
+        if self._muscles.data is None:
+            return None
+        try:
+            m_stamp, names, a = self._muscles.decode()
+            if abs(m_stamp - stamp) > MAX_SKEW_NS:
+                return None
+            return strongest(names, a)
+        except ValueError as exc:
+            self._warn("muscles", f"not colouring by muscle_forces: {exc}")
+            return None
+
     def _tick(self) -> None:
         t = self._torques
         if t.data is None or t.seq == self._published_seq:
@@ -138,7 +162,7 @@ class ArmVizNode(Node):
         self._published_seq = t.seq
         try:
             stamp, q, tau = t.decode(self.arm.joint_names)
-            frame = self.maker.frame(q, tau)
+            frame = self.maker.frame(q, tau, self._strongest(stamp))
         except ValueError as exc:
             self._warn("torques", f"not drawing joint_torques: {exc}")
             return

@@ -26,6 +26,11 @@ VIEW_SPECS = (
     Spec("config_topic", "torque_node/config", "the torque node's config topic (JSON, latched): "
          "its model, side, body size and payload replace this node's own model parameters, "
          "following every live change; '' = never listen"),
+    Spec("muscle_topic", "muscle_forces", "muscle_node's JointState output (name = muscles, "
+         "position = activation): while it answers torques within 0.5 s of those drawn, the "
+         "forearm's links are coloured by its strongest forearm muscle's activation (viridis, "
+         "0..1) and a label '<muscle> <activation>' is drawn beside them (ns muscle/strongest); "
+         "'' = never listen"),
     Spec("markers_topic", "arm_markers", "visualization_msgs/MarkerArray output: one marker per "
          "massive link (ns = link name) and optional torque arrows (ns = torque/<joint>)"),
     Spec("description_topic", "robot_description", "std_msgs/String output (transient local): "
@@ -60,6 +65,7 @@ class ArmVizSettings:
     rate_hz: float
     torque_topic: str
     config_topic: str
+    muscle_topic: str
     markers_topic: str
     description_topic: str
     frame_id: str
@@ -71,10 +77,12 @@ class ArmVizSettings:
     @classmethod
     def from_params(cls, p: Params) -> ArmVizSettings:
         topics = ["torque_topic", "markers_topic", "description_topic"]
-        if p.value("config_topic"):
-            topics.append("config_topic")
+        for optional in ("config_topic", "muscle_topic"):
+            if p.value(optional):
+                topics.append(optional)
         s = cls(p.value("rate_hz"), p.topic("torque_topic"),
                 p.topic("config_topic") if p.value("config_topic") else "",
+                p.topic("muscle_topic") if p.value("muscle_topic") else "",
                 p.topic("markers_topic"), p.topic("description_topic"), p.value("frame_id"),
                 *view_values(p.values(LIVE_VIEW)))
         p.distinct_topics(topics)

@@ -33,6 +33,10 @@ definitions, live). The muscle set, source, licence, scaling and solver are stat
 
 Bad input (NaN torques, missing joints, no efforts): the sample is dropped, counted per
 reason, one warning line per reason per second; the node keeps running.
+
+Behind (a loaded machine: the node runs at nice 10), it takes what has arrived out of the
+DDS reader every 5 ms into a queue of its own and answers every sample in order, late but
+not lost (muscle_backlog.py; `backlog_limit`, on /diagnostics).
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ from .common import latched_qos, main_for, stream_qos
 from .diagnostics import PipelineStats
 from .input_plans import GENERIC, InputPlans
 from .model_builder import ModelBuilder
+from .muscle_backlog import BUDGET_NS, DRAIN_NS, InputBacklog
 from .muscle_io import NO_EFFORT, NO_VELOCITY, OutputTemplates, StateReader
 from .muscle_settings import (
     MODEL_NAMES,
@@ -145,6 +150,12 @@ class MuscleNode(MuscleStatus, Node):
         self._publish_config(self.bundle, 0)
         self.sub = self.create_subscription(JointState, s.input_topic, self._on_torques,
                                             stream_qos(s.input_depth, s.input_reliable), raw=True)
+        handle = self.sub.handle
+        self._backlog = InputBacklog(lambda: handle.take_message(JointState, True),
+                                     s.backlog_limit)
+        self._own_queue = s.backlog_limit > 0  # 0: the DDS reader's queue alone (as before)
+        self._resume = self.create_timer(0.001, self._on_resume)
+        self._resume.cancel()  # armed only when a callback returns with samples queued
         if s.config_topic:
             self.create_subscription(String, s.config_topic, self._on_torque_config, latched_qos())
         self.add_on_set_parameters_callback(self._on_set)
@@ -163,6 +174,37 @@ class MuscleNode(MuscleStatus, Node):
 
     # -- the hot path --------------------------------------------------------------------
     def _on_torques(self, data: bytes) -> None:
+        """The executor's sample: answered at once, or after those the node has queued
+        (muscle_backlog.py: taken from the DDS reader while it works, answered in order)."""
+        bl = self._backlog
+        bl.delivered()
+        if bl.pending:
+            bl.pending.append(data)
+            self._work()
+            return
+        self._sample(data)
+        if self._own_queue and _perf_ns() - bl.last_drain > DRAIN_NS and bl.drain():
+            self._work()
+
+    def _work(self) -> None:
+        """Answer the queued samples in order, taking new arrivals every DRAIN_NS, for at
+        most BUDGET_NS; then return (timers and /diagnostics run) and resume."""
+        bl = self._backlog
+        q, end = bl.pending, _perf_ns() + BUDGET_NS
+        while q:
+            self._sample(q.popleft())
+            now = _perf_ns()
+            if now - bl.last_drain > DRAIN_NS:
+                bl.drain()
+            if now > end and q:
+                self._resume.reset()
+                return
+
+    def _on_resume(self) -> None:
+        self._resume.cancel()
+        self._work()
+
+    def _sample(self, data: bytes) -> None:
         t_start = _perf_ns()
         recv_ns = _time_ns()
         st = self.stats

@@ -54,6 +54,12 @@ MUSCLE_SPECS = (
          "resource limit max_samples: python -m benchmarks.reader_depth). With 1000 the backlog "
          "reached 1 s and 2 606 of 97 500 samples were dropped (benchmarks/muscle_node.py, "
          "load 1-3.6)", "messages", 1, 100000),
+    Spec("backlog_limit", 60000, "samples this node queues itself when it falls behind: while "
+         "it works it takes what has arrived out of the DDS reader (whose queue stops at 5000, "
+         "input_depth) every 5 ms and answers it in order; past this many the oldest are dropped "
+         "and counted (backlog_dropped_total in /diagnostics). ~1 KB a sample (60000: 60 s at "
+         "1 kHz). 0 = no queue of its own: the DDS reader's alone (the node before 2026-12: "
+         "2 203 of 97 500 lost in a chain at load 2-4)", "samples", 0, 10000000),
     Spec("qos_reliable", True, "reliable (true) or best-effort (false) outputs"),
     Spec("input_reliable", False, "reliable (true) or best-effort (false) joint_torques input. "
          "Best effort by default so the torque path never waits for the muscles: a reliable "
@@ -87,6 +93,7 @@ class MuscleSettings(Settings):
     passive: bool
     qos_depth: int
     input_depth: int
+    backlog_limit: int
     qos_reliable: bool
     input_reliable: bool
     executor: str

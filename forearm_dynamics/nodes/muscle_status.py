@@ -50,7 +50,7 @@ class MuscleStatus:
                        "tendon": "rigid"},
             "decimation": s.decimation, "build_ms": round(b.build_ms, 3),
             "input_qos": "reliable" if s.input_reliable else "best effort",
-            "input_depth": s.input_depth, "nice": os.nice(0),
+            "input_depth": s.input_depth, "backlog_limit": s.backlog_limit, "nice": os.nice(0),
         }
 
     def _publish_config(self, b: MuscleBundle, applies_from: int | None) -> None:
@@ -89,9 +89,15 @@ class MuscleStatus:
             "infeasible_total": str(self.infeasible), "solver_failed_total": str(self.solver_failed),
             "config_id": str(b.config_id), "muscles": str(b.model.n),
             "model": f"{b.arm_summary['body_size']} {b.model.side} arm ({b.source})",
+            **self._backlog.period_values(),
         }
         status.values.extend(KeyValue(key=k, value=x) for k, x in values.items())
-        if self.infeasible and status.level == status.OK:
+        bl = self._backlog
+        if bl.dropped or bl.gaps:
+            status.level = status.ERROR
+            status.message = (f"input lost: {bl.dropped} dropped past backlog_limit, "
+                              f"{bl.gaps} missing in the input's sequence numbers")
+        elif self.infeasible and status.level == status.OK:
             status.level = status.WARN
             status.message = f"{self.infeasible} infeasible sample(s) (reserves carry torque)"
         self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
@@ -103,4 +109,7 @@ class MuscleStatus:
         return (f"summary: received {st.received}, solved {st.published}, decimated "
                 f"{self.decimated}, rejected {sum(rejected.values())}"
                 + (f" ({', '.join(f'{k} {n}' for k, n in rejected.items())})" if rejected else "")
-                + f", infeasible {self.infeasible}, reserve use {self.reserve_use}")
+                + f", infeasible {self.infeasible}, reserve use {self.reserve_use}"
+                + f", backlog max {self._backlog.max_total} (drained {self._backlog.drained}, "
+                f"dropped {self._backlog.dropped}, input gaps {self._backlog.gaps}, "
+                f"unanswered at stop {len(self._backlog.pending)})")

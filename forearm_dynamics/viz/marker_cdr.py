@@ -15,7 +15,16 @@ import struct
 
 import numpy as np
 
-from .markers import ARROW, ARROW_SCALE, MarkerFrame
+from .markers import (
+    ARROW,
+    ARROW_SCALE,
+    MUSCLE_NS,
+    MUSCLE_TEXT_HEIGHT,
+    MUSCLE_TEXT_LIFETIME,
+    MUSCLE_TEXT_RGBA,
+    TEXT,
+    MarkerFrame,
+)
 
 ADD, DELETEALL = 0, 3
 _HEADER = b"\x00\x01\x00\x00"  # CDR_LE, no options
@@ -43,7 +52,8 @@ class _Buf:
 
 
 def _marker(buf: _Buf, sec: int, nsec: int, frame: bytes, ns: bytes, kind: int, action: int,
-            pose: tuple, scale: tuple, rgba: tuple, points: np.ndarray | None) -> tuple[int, ...]:
+            pose: tuple, scale: tuple, rgba: tuple, points: np.ndarray | None,
+            text: bytes = b"", lifetime: tuple[int, int] = (0, 0)) -> tuple[int, ...]:
     """Appends one Marker; returns where its stamp, pose (+ scale), colour and points are."""
     buf.align(4)
     at_stamp = len(buf.b)
@@ -57,7 +67,7 @@ def _marker(buf: _Buf, sec: int, nsec: int, frame: bytes, ns: bytes, kind: int, 
     buf.b += struct.pack("<10d", *pose, *scale)
     at_color = len(buf.b)
     buf.b += struct.pack("<4f", *rgba)  # offset is a multiple of 8 here
-    buf.b += struct.pack("<iI?", 0, 0, False)  # lifetime (0 = forever), frame_locked
+    buf.b += struct.pack("<iI?", *lifetime, False)  # lifetime (0 = forever), frame_locked
     at_points = -1
     if points is None:
         buf.u32(0)
@@ -74,7 +84,7 @@ def _marker(buf: _Buf, sec: int, nsec: int, frame: bytes, ns: bytes, kind: int, 
     buf.string(b"")  # texture.format
     buf.u32(0)  # texture.data
     buf.u32(0)  # uv_coordinates
-    buf.string(b"")  # text
+    buf.string(text)  # text
     buf.string(b"")  # mesh_resource
     buf.string(b"")  # mesh_file.filename
     buf.u32(0)  # mesh_file.data
@@ -94,7 +104,7 @@ class _Template:
     def __init__(self, frame: MarkerFrame, frame_id: str, delete_all: bool):
         fid = frame_id.encode()
         buf = _Buf()
-        buf.u32(len(frame.ns) + len(frame.arrow_ns) + int(delete_all))
+        buf.u32(len(frame.ns) + len(frame.arrow_ns) + int(delete_all) + int(frame.text is not None))
         stamps, poses, colors, points = [], [], [], []
         if delete_all:
             stamps.append(_marker(buf, 0, 0, fid, b"", 0, DELETEALL, _ZERO_POSE, (0.0, 0.0, 0.0),
@@ -111,6 +121,13 @@ class _Template:
             stamps.append(o[0])
             colors.append(o[2])
             points.append(o[3])
+        self.text_pose = None
+        if frame.text is not None:  # its text, orientation, scale and colour are the template's
+            o = _marker(buf, 0, 0, fid, MUSCLE_NS.encode(), TEXT, ADD, _ZERO_POSE,
+                        (0.0, 0.0, MUSCLE_TEXT_HEIGHT), MUSCLE_TEXT_RGBA, None,
+                        frame.text.encode(), MUSCLE_TEXT_LIFETIME)
+            stamps.append(o[0])
+            self.text_pose = o[1]
         self.size = len(buf.b)
         raw = np.zeros(4 + self.size + (-(4 + self.size)) % 8, np.uint8)
         raw[4:4 + self.size] = np.frombuffer(bytes(buf.b), np.uint8)
@@ -121,6 +138,8 @@ class _Template:
         self.color = (np.array(colors) + shift) // 4
         self.n_shapes = len(frame.ns)
         self.points = (np.array(points, int) + shift) // 8
+        if self.text_pose is not None:
+            self.text_pose = (self.text_pose + shift) // 8
 
     def encode(self, frame: MarkerFrame, stamp_ns: int) -> bytes:
         b = self.raw.copy()
@@ -136,6 +155,8 @@ class _Template:
         if len(self.points):
             f64[self.points[:, None] + np.arange(6)] = frame.arrows.reshape(-1, 6)
             f32[self.color[n:, None] + np.arange(4)] = frame.arrow_rgba
+        if self.text_pose is not None:
+            f64[self.text_pose + np.arange(3)] = frame.text_position
         return b[4:4 + self.size].tobytes()
 
 
@@ -145,7 +166,8 @@ _TEMPLATES: dict[tuple, _Template] = {}
 def marker_array_cdr(frame: MarkerFrame, frame_id: str, stamp_ns: int,
                      delete_all: bool = False) -> bytes:
     """The serialized MarkerArray of nodes/arm_markers.marker_array (the same message)."""
-    key = (frame.ns, tuple(frame.types.tolist()), frame.arrow_ns, frame_id, delete_all)
+    key = (frame.ns, tuple(frame.types.tolist()), frame.arrow_ns, frame_id, delete_all,
+           frame.text)
     t = _TEMPLATES.get(key)
     if t is None:
         if len(_TEMPLATES) > 16:  # a few models in one process: keep the cache small

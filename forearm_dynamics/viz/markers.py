@@ -15,17 +15,29 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .colors import TorqueColours
+from .colors import TorqueColours, viridis
 from .scene import ArmScene
 
 #: visualization_msgs/Marker type constants (the same numbers as the message's).
-ARROW, CUBE, SPHERE, CYLINDER = 0, 1, 2, 3
+ARROW, CUBE, SPHERE, CYLINDER, TEXT = 0, 1, 2, 3, 9  # TEXT: TEXT_VIEW_FACING
 KINDS = {"box": CUBE, "sphere": SPHERE, "cylinder": CYLINDER}
 ARROW_NS = "torque/"
 #: Arrow shaft and head diameter, head length (m).
 ARROW_SCALE = (0.004, 0.008, 0.008)
 #: Shortest arrow drawn (m): a zero-length arrow is invalid in RViz.
 MIN_ARROW = 1e-3
+#: The strongest muscle's label (muscle_forces): ns, text height (m), offset from the
+#: forearm's last link along the root frame's z (lateral, m), colour (white).
+MUSCLE_NS = "muscle/strongest"
+MUSCLE_TEXT_HEIGHT = 0.02
+MUSCLE_TEXT_OFFSET = (0.0, 0.0, 0.06)
+MUSCLE_TEXT_RGBA = (1.0, 1.0, 1.0, 1.0)
+#: the label's lifetime (s, ns): a viewer removes it when it is not redrawn (muscle_forces
+#: stopped or fell behind), as it would keep a marker that is simply no longer sent
+MUSCLE_TEXT_LIFETIME = (0, 500_000_000)
+#: The joints whose links are the forearm (segmented: forearm_proximal, forearm_distal;
+#: anatomical: ulna, radius; solid: forearm_distal).
+FOREARM_JOINTS = ("elbow_flexion", "pro_sup")
 
 
 @dataclass(frozen=True)
@@ -41,6 +53,8 @@ class MarkerFrame:
     arrow_ns: tuple[str, ...] = ()
     arrows: np.ndarray | None = None  # (m, 2, 3): start, end (root frame)
     arrow_rgba: np.ndarray | None = None  # (m, 4)
+    text: str | None = None  # the strongest muscle's label (ns MUSCLE_NS), if drawn
+    text_position: np.ndarray | None = None  # (3,) root frame
 
 
 def quaternions(r: np.ndarray) -> np.ndarray:
@@ -75,9 +89,15 @@ class MarkerMaker:
         self._fixed_rgb = np.array([s.rgba[:3] for s in shapes], float)
         self.arrow_ns = tuple(ARROW_NS + n for n in scene.joint_names) if arrows else ()
         self._n = len(scene.joint_names)
+        forearm = [scene.joint_names.index(j) for j in FOREARM_JOINTS if j in scene.joint_names]
+        self._forearm = np.isin(self._joint, forearm)  # the links muscle colour replaces
+        self._forearm_last = int(np.nonzero(self._forearm)[0][-1]) if self._forearm.any() else -1
 
-    def frame(self, q, tau) -> MarkerFrame:
-        """The markers at posture q (rad) with torques tau (N·m), both in joint_names order."""
+    def frame(self, q, tau, muscle: tuple[str, float] | None = None) -> MarkerFrame:
+        """The markers at posture q (rad) with torques tau (N·m), both in joint_names order.
+        muscle: (name, activation 0..1) of the forearm's strongest muscle (muscle_forces), or
+        None: the forearm links are then coloured by viridis(activation) instead of their
+        joints' torques, and a label "<name> <activation>" is drawn beside the forearm."""
         tau = np.asarray(tau, float).reshape(-1)
         if tau.shape != (self._n,) or not np.isfinite(tau).all():
             raise ValueError(f"torques must be {self._n} finite numbers in joint_names order, "
@@ -86,12 +106,19 @@ class MarkerMaker:
         pos, quat = pose[:, :3], pose[:, 3:]
         joint_rgb = self.colours.rgb(tau)
         rgb = np.where((self._joint < 0)[:, None], self._fixed_rgb, joint_rgb[self._joint])
+        text = text_at = None
+        if muscle is not None and self._forearm_last >= 0:
+            name, a = muscle
+            rgb[self._forearm] = viridis(a)
+            text = f"{name} {a:.2f}"
+            text_at = pos[self._forearm_last] + np.array(MUSCLE_TEXT_OFFSET)
         rgba = np.column_stack([rgb, np.full(len(rgb), self.alpha)])
         if not self.arrows:
-            return MarkerFrame(self.ns, self.types, pos, quat, self.scales, rgba)
+            return MarkerFrame(self.ns, self.types, pos, quat, self.scales, rgba,
+                               text=text, text_position=text_at)
         origins, axes = self.scene.joint_axes(q)
         length = np.maximum(np.abs(tau) * self.arrow_scale, MIN_ARROW) * np.where(tau < 0, -1.0, 1.0)
         ends = origins + length[:, None] * axes
         return MarkerFrame(self.ns, self.types, pos, quat, self.scales, rgba, self.arrow_ns,
                            np.stack([origins, ends], axis=1),
-                           np.column_stack([joint_rgb, np.ones(self._n)]))
+                           np.column_stack([joint_rgb, np.ones(self._n)]), text, text_at)
