@@ -21,9 +21,9 @@ NRMSE = RMSE / peak-to-peak of the reference torque, after SETTLE_S = 1 s ("sett
 apart, in the first second ("first_second": the start, from rest for UE-ADL, mid-swing
 for running); and the ratio to the causal 6 Hz Butterworth (the node's `butterworth`
 estimator, cutoff 6 Hz) on the same window. Estimators: `kalman` (the node's default,
-causal), `kalman` with delay_s 0.05, 0.1, 0.2, `butterworth` 6 Hz, and `kalman_practice_gain`
-(issue 29's opt-in practice gain, causal: practice_band_hz 6, kalman_min_bandwidth_hz 0;
-not in the targets, which are the default's) and `selector` (opt-in, estimation/selector.py).
+causal), `kalman` with delay_s 0.05, 0.1, 0.2, `butterworth` 6 Hz, and `kalman_model_only`
+(the default's model alone: practice_filter 0, the default before issue 29's practice filter;
+not in the targets, which are the default's).
 Medians and worst cases per half over every (recording, DOF) series. `bag_torques_max_dev_nm`: the largest
 difference between `bag_torques`' offline computation (offline/torques.compute) and the
 node's outputs at equal stamps (0 when bag_torques stamps delayed estimates as the node),
@@ -67,10 +67,8 @@ ESTIMATORS = {
     "kalman_delay_0.1": ("kalman", {"delay_s": 0.1}),
     "kalman_delay_0.2": ("kalman", {"delay_s": 0.2}),
     "butterworth": ("butterworth", {"butterworth_cutoff_hz": 6.0}),
-    # issue 29's opt-in practice gain, causal (kalman.py: practice_band_hz, the measured setting)
-    "kalman_practice_gain": ("kalman", {"practice_band_hz": 6.0, "kalman_min_bandwidth_hz": 0.0}),
-    # opt-in: per joint kalman or 0.75 practice gain + 0.25 Butterworth, judged online (selector.py)
-    "selector": ("selector", {}),
+    # the default's model alone, causal (the practice filter off: the default before issue 29)
+    "kalman_model_only": ("kalman", {"practice_filter": 0.0}),
 }
 BASELINE = "butterworth"
 BAG_CHECK = 4  # recordings per half whose bag_torques computation is compared with the node's
@@ -293,10 +291,9 @@ def run(args) -> dict:
 # -- tables for the docs -------------------------------------------------------------------
 DOCS_ROWS = (("kalman", "`kalman`, 0"), ("kalman_delay_0.05", "`kalman`, 0.05 s"),
              ("kalman_delay_0.1", "`kalman`, 0.1 s"), ("kalman_delay_0.2", "`kalman`, 0.2 s"),
-             ("kalman_practice_gain", "`kalman` practice_band_hz 6 (opt-in), 0"),
-             ("selector", "`selector` (opt-in; no σ), 0"))
-#: README's rows: the default causal and delayed, and the opt-in for raw mocap without a delay
-README_ROWS = ("kalman", "kalman_delay_0.05", "selector")
+             ("kalman_model_only", "`kalman` practice_filter 0 (the model alone), 0"))
+#: README's rows: the default, causal and delayed
+README_ROWS = ("kalman", "kalman_delay_0.05")
 
 
 def _x(v) -> str:
