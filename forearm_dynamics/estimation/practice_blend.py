@@ -30,6 +30,8 @@ import functools
 
 import numpy as np
 
+from ..filtering import lowpass  # scipy.signal: imported with the estimator, not in a callback
+
 #: the practice's kernel half-width (s): the estimates are judged this late
 REF_DELAY_S = 0.2
 #: an evaluation every EVERY_S, exponentially weighted over TAU_S
@@ -58,8 +60,6 @@ def _kernels(dt: float, cutoff_hz: float, half_s: float) -> np.ndarray:
     give the practice's q̇ and q̈ at the middle sample: the response of the zero-phase
     filter (filtering.lowpass: forward-backward Butterworth) to an impulse, differentiated
     as estimation/offline.zero_phase does (np.gradient twice), truncated to +-h."""
-    from ..filtering import lowpass
-
     h = max(2, round(half_s / dt))
     fs = 1.0 / dt
     if not 0.0 < cutoff_hz < 0.5 * fs:

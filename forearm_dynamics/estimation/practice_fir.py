@@ -41,6 +41,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from scipy.interpolate import BSpline  # with the estimator, not in a node's callback
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "practice_fir.json"
 #: the kernels' span (s) and B-spline knot spacing (s)
@@ -60,17 +61,13 @@ def knots() -> np.ndarray:
 
 
 def basis(tau: np.ndarray) -> np.ndarray:
-    """(len(tau), nb): the cubic B-splines on (0, T_S], the last one (non-zero at T_S) dropped."""
-    from scipy.interpolate import BSpline
-
-    t = knots()
-    nb = len(t) - 4
-    out = np.zeros((len(tau), nb))
-    for j in range(nb):
-        c = np.zeros(nb)
-        c[j] = 1.0
-        out[:, j] = BSpline(t, c, 3, extrapolate=False)(tau)
-    out = np.nan_to_num(out)
+    """(len(tau), nb): the cubic B-splines on (0, T_S], the last one (non-zero at T_S) dropped;
+    zero outside (0, T_S)."""
+    tau = np.asarray(tau, float)
+    inside = (tau >= 0.0) & (tau <= T_S)
+    out = np.zeros((len(tau), len(knots()) - 4))
+    if inside.any():
+        out[inside] = BSpline.design_matrix(tau[inside], knots(), 3).toarray()
     return out[:, :-1]
 
 
@@ -97,10 +94,8 @@ def tap_map(dt: float) -> np.ndarray:
     tau = (np.arange(K * sub) + 0.5) * (dt / sub)  # midpoints over (0, K dt]
     B = basis(tau) * (dt / sub)  # (P, nb): g at the points times their width
     x = tau / dt
-    M = np.zeros((K, B.shape[1]))
-    for k in range(1, K + 1):
-        hat = np.clip(1.0 - np.abs(x - k), 0.0, None)
-        M[k - 1] = hat @ B
+    hats = np.clip(1.0 - np.abs(x[None, :] - np.arange(1, K + 1)[:, None]), 0.0, None)  # (K, P)
+    M = hats @ B
     a = -np.arange(1, K + 1) * dt  # taps @ a = the estimate for x(t - s) - x(t) = -s (a unit ramp)
     M = (np.eye(K) - np.outer(a, a) / (a @ a)) @ M
     M.setflags(write=False)
