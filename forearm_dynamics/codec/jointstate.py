@@ -224,8 +224,9 @@ def tidy(data: bytes) -> bytes:
     return lay.zero_padding(data)[:end]
 
 
-class TorqueReader:
-    """The newest joint_torques message, decoded on demand in model joint order."""
+class _KeptJointState:
+    """The newest JointState of a topic kept as bytes (a 1 kHz topic drawn at 30 Hz decodes
+    only what is drawn) and its layout, parsed again only when the bytes' layout changes."""
 
     def __init__(self):
         self.data: bytes | None = None
@@ -235,6 +236,29 @@ class TorqueReader:
     def keep(self, data: bytes) -> None:
         self.data = data
         self.seq += 1
+
+    def _read(self) -> tuple[int, tuple[str, ...], np.ndarray, np.ndarray]:
+        """(stamp ns, names, positions, efforts) of the kept message: the fast layout when
+        the bytes are little-endian CDR as rclpy writes them, else the general decoder."""
+        data = self.data
+        lay = self._layout
+        if lay is None or not lay.matches(data):
+            try:
+                lay = parse_layout(data)
+            except NotMine:
+                lay = None
+            self._layout = lay
+        if lay is not None:
+            sec, nsec = np.frombuffer(data, "<i4", 1, 4)[0], np.frombuffer(data, "<u4", 1, 8)[0]
+            return (int(sec) * 1_000_000_000 + int(nsec), lay.names, lay.array(data, "position"),
+                    lay.array(data, "effort"))
+        m = deserialize(data, "JointState")  # big-endian or otherwise unusual bytes
+        return (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, tuple(m.name),
+                np.array(m.position), np.array(m.effort))
+
+
+class TorqueReader(_KeptJointState):
+    """The newest joint_torques message, decoded on demand in model joint order."""
 
     def stamp(self) -> int:
         """Header stamp (ns) of the kept message: read from the bytes, nothing decoded."""
@@ -247,22 +271,7 @@ class TorqueReader:
 
     def decode(self, joint_names: tuple[str, ...]) -> tuple[int, np.ndarray, np.ndarray]:
         """(stamp ns, q, tau) in joint_names order; ValueError naming what is missing."""
-        data = self.data
-        lay = self._layout
-        if lay is None or not lay.matches(data):
-            try:
-                lay = parse_layout(data)
-            except NotMine:
-                lay = None
-            self._layout = lay
-        if lay is not None:
-            names, pos, eff = lay.names, lay.array(data, "position"), lay.array(data, "effort")
-            sec, nsec = np.frombuffer(data, "<i4", 1, 4)[0], np.frombuffer(data, "<u4", 1, 8)[0]
-            stamp = int(sec) * 1_000_000_000 + int(nsec)
-        else:  # big-endian or otherwise unusual bytes: the general decoder
-            m = deserialize(data, "JointState")
-            names, pos, eff = tuple(m.name), np.array(m.position), np.array(m.effort)
-            stamp = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+        stamp, names, pos, eff = self._read()
         if len(pos) != len(names) or len(eff) != len(names):
             raise ValueError(f"joint_torques carries {len(names)} names, {len(pos)} positions and "
                              f"{len(eff)} efforts; position and effort are needed for every joint")
@@ -274,33 +283,11 @@ class TorqueReader:
         return stamp, np.asarray(pos, float)[cols], np.asarray(eff, float)[cols]
 
 
-class MuscleReader:
+class MuscleReader(_KeptJointState):
     """The newest muscle_forces message (muscle_node's output: name = muscles, position =
     activation), kept as bytes and decoded on demand (arm_viz: 30 Hz of a 1 kHz topic)."""
 
-    def __init__(self):
-        self.data: bytes | None = None
-        self.seq = 0
-        self._layout = None
-
-    def keep(self, data: bytes) -> None:
-        self.data = data
-        self.seq += 1
-
     def decode(self) -> tuple[int, tuple[str, ...], np.ndarray]:
         """(stamp ns, names, activations) of the kept message."""
-        data = self.data
-        lay = self._layout
-        if lay is None or not lay.matches(data):
-            try:
-                lay = parse_layout(data)
-            except NotMine:
-                lay = None
-            self._layout = lay
-        if lay is not None:
-            sec, nsec = np.frombuffer(data, "<i4", 1, 4)[0], np.frombuffer(data, "<u4", 1, 8)[0]
-            return (int(sec) * 1_000_000_000 + int(nsec), lay.names,
-                    np.asarray(lay.array(data, "position"), float))
-        m = deserialize(data, "JointState")
-        return (m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec, tuple(m.name),
-                np.asarray(m.position, float))
+        stamp, names, pos, _ = self._read()
+        return stamp, names, np.asarray(pos, float)
