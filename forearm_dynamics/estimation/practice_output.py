@@ -1,7 +1,7 @@
 """The Kalman filter's causal q̈ with the practice filter (issue 29), apart from the filter.
 
 Which joints (`_practice_filter_joints`, at every noise update, every 0.25 s): positions
-only, causal, the noise measured, and per joint noisy (white level above EXACT_WHITE x the
+only, causal, at 25 Hz or faster, the noise measured, and per joint noisy (white level above EXACT_WHITE x the
 floor: not exact or held input) and either filtered by the model wider than the practice's
 6 Hz, (psd / (r^2 dt))^(1/6) > 2 pi 6 Hz, or with coloured noise (band level above
 COLOURED_RATIO x the white level; once in, down to practice_lag.KEEP_RATIO): such a joint
@@ -37,6 +37,10 @@ from .noise_belief import COLOURED_RATIO, EXACT_WHITE
 FADE_S = 0.1
 #: the practice's band (Hz) the filter's kernel estimates (benchmarks/practice_fir_design.py)
 BAND_HZ = 6.0
+#: the slowest stream (s per sample) the filter serves: it was designed on 33-100 Hz (and
+#: checked on noise to 1 kHz); below 25 Hz the practice's 6 Hz band nears the Nyquist
+#: frequency and the model alone estimates
+MAX_PERIOD_S = 0.04
 
 
 class PracticeOutput:
@@ -57,10 +61,10 @@ class PracticeOutput:
     def _practice_filter_joints(self) -> None:
         ne = self.noise_estimator
         use, was = self._pf_use, self._pf_was
-        if not self.noise_known(False) or not ne.white_evaluations:
+        dt = ne.period_s or self._dt
+        if not self.noise_known(False) or not ne.white_evaluations or dt > MAX_PERIOD_S:
             use.fill(False)
             return
-        dt = ne.period_s or self._dt
         self._pfir.configure(dt)
         self._pblend.configure(dt)
         self._pblend.update()
