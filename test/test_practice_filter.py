@@ -93,6 +93,10 @@ def test_coloured_content_above_the_band_is_smoothed_like_the_practice() -> None
     # (measured q̈ RMSE 4.18 against 6.90 and 6.12 rad/s²)
     assert e_new <= 0.7 * e_bw, (e_new, e_bw, e_off)
     assert e_new <= 0.75 * e_off, (e_new, e_off)
+    # practice_filter 0.5: half the blend beside half the model's q̈, an error in between
+    half, est_half = stream(q, settings={"practice_filter": 0.5})
+    assert est_half.practice_filter_weight()[0] == 0.5
+    assert e_new < rms(half[late, 0] - ref[late]) < e_off
 
 
 def test_a_slow_movement_does_not_get_the_library_bandwidth() -> None:

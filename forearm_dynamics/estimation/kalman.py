@@ -138,11 +138,12 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
                     "what the offline 6 Hz practice keeps): the belief is capped where the "
                     "filter's bandwidth reaches it; 0 = off", lo=0.0, hi=1000.0),
         SettingSpec("practice_filter", 1.0, "",
-                    "causal, positions only: 1 = a noisy joint that the model filters wider than "
-                    "6 Hz or whose noise is coloured gets as q̈ the blend of the model's and the "
-                    "practice filter's (a causal kernel designed on real arm movements), weighted "
-                    "per joint against the offline practice (practice_output.py); 0 = the model's "
-                    "own q̈ on every joint", lo=0.0, hi=1.0),
+                    "causal, positions only: the share of the practice filter's blend in the q̈ of "
+                    "a noisy joint that the model filters wider than 6 Hz or whose noise is "
+                    "coloured (the blend of the model's q̈ and a causal kernel's designed on real "
+                    "arm movements, weighted per joint against the offline practice: "
+                    "practice_output.py); 1 = the blend, 0 = the model's own q̈ on every joint",
+                    lo=0.0, hi=1.0),
         SettingSpec("delay_practice_hz", 6.0, "Hz",
                     "with delay_s >= 0.04 s, positions only: the delayed estimate of a noisy joint with "
                     "coloured noise or a model wider than this band moves towards the offline "
@@ -201,15 +202,16 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
         self._first: tuple[int, np.ndarray] | None = None
         self._restarted = False
         self._jump_exact = False
-        if v["practice_filter"] not in (0.0, 1.0):
-            raise ValueError(f"estimator setting practice_filter = {v['practice_filter']!r} must be 0 or 1")
-        on = v["practice_filter"] == 1.0 and self.delay_s <= 0.0
+        self._pf_share = v["practice_filter"]
+        on = self._pf_share > 0.0 and self.delay_s <= 0.0
         self._pfir = PracticeFIR(n) if on else None  # the practice filter (practice_output.py)
         self._pblend = PracticeBlend(n, BAND_HZ) if on else None
         self._pf_q: np.ndarray | None = None  # the last sample's positions (gate: prediction)
         self._pf_use = np.zeros(n, bool)  # the rule's joints
         self._pf_was = np.zeros(n, bool)
         self._pf_w = np.zeros(n)  # their share of the blend in q̈, faded in and out
+        self._pf_target = np.zeros(n)  # ... towards this (practice_filter on the rule's joints)
+        self._pf_d = np.zeros(n)
         self._pf_fading = False
         lag_band = v["delay_practice_hz"]
         on = lag_band > 0.0 and self.delay_s >= practice_lag.MIN_DELAY_S

@@ -12,13 +12,14 @@ model, right for white noise, is the better estimate (real corpus's tuning half 
 of added white noise: model 0.62 x the Butterworth, the practice filter 0.83 x; 3 deg:
 0.40 x against 0.83 x; /tmp study).
 
-Output (`_practice_filter_output`): q and q̇ stay the filter's (a torque's error on real
+Output (`_practice_filter_output`): q and q̇ stay the model's (a torque's error on real
 recordings is almost all q̈'s; a q̇ of the filter's kernel made the simulated mocap sensor's
 finger torques 2 x worse through the arm's velocities); q̈ of the rule's joints is the
 blend of the model's and the practice filter's (practice_blend.py: the weight measured per
-joint against the practice), once the filter's ring holds the kernel's span, faded in (and
-out, when a joint leaves the rule) linearly over FADE_S so that q̈ does not jump; a restart
-(a reset, a discontinuity) drops them at once, as the model restarts there too.
+joint against the practice), with the share estimator.practice_filter (1 by default) of it
+beside the model's own, once the filter's ring holds the kernel's span, faded in (and out,
+when a joint leaves the rule) linearly over FADE_S so that q̈ does not jump; a restart (a
+reset, a discontinuity) drops them at once, as the model restarts there too.
 
 `PracticeOutput` is a mixin of KalmanCA: it reads _pfir, _pblend, _pf_use, _pf_w, _out,
 _dt, psd, _r, _floor, noise_estimator and writes the output's q̈ row.
@@ -74,6 +75,7 @@ class PracticeOutput:
         coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
         use &= wide | coloured
         np.copyto(was, use)
+        np.multiply(use, self._pf_share, out=self._pf_target)
 
     def _practice_filter_output(self, q: np.ndarray) -> None:
         """q̈ of the rule's joints: the blend of the model's and the practice filter's; every
@@ -88,19 +90,24 @@ class PracticeOutput:
             return
         f = pf.estimate()
         self._pblend.add(q, qdd, f)
-        target = self._pf_use
+        target = self._pf_target
         done = np.array_equal(w, target)
-        if not done:  # fading: towards 1 on the rule's joints, 0 elsewhere
-            w += np.where(target, self._dt / FADE_S, -self._dt / FADE_S)
-            np.clip(w, 0.0, 1.0, out=w)
+        if not done:  # fading: towards the share on the rule's joints, 0 elsewhere
+            d = self._pf_d
+            np.subtract(target, w, out=d)
+            step = self._dt / FADE_S
+            arrive = np.abs(d) <= step
+            np.clip(d, -step, step, out=d)  # at most a step, never past the target
+            w += d
+            np.copyto(w, target, where=arrive)  # exactly there (w + (t - w) may miss by an ulp)
         self._pf_fading = not done
         if not w.any():
             return
         # the blend f + beta (k - f) = k + (1 - beta)(f - k), then faded: k + w (blend - k)
         f -= qdd
         f *= self._pblend.share
-        if done:
-            np.add(qdd, f, out=qdd, where=target)
+        if done and self._pf_share == 1.0:  # every weight 0 or 1
+            np.add(qdd, f, out=qdd, where=self._pf_use)
         else:
             f *= w
             qdd += f
