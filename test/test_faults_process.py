@@ -81,9 +81,10 @@ class Watch:
     def wait_torques(self, n: int, timeout: float = 120.0) -> None:
         """n more torques (a hang guard: 1.5 s of stream at 1 kHz takes minutes at load 11+
         on 2 cores only when something is wrong)."""
-        start = len(self.torques)
+        start, states = len(self.torques), len(self.states)
         assert self.peer.spin_until(lambda: len(self.torques) >= start + n, timeout), \
-            f"only {len(self.torques) - start} of {n} torques"
+            (f"only {len(self.torques) - start} of {n} torques in {timeout:.0f} s, while "
+             f"{len(self.states) - states} joint_states arrived here")
 
     def _poll(self, check, timeout: float) -> bool:
         """Spin in 0.5 s steps until check() (which reads a file being written: not on

@@ -47,9 +47,10 @@ def test_extrapolated_lag_is_the_filters_error_under_constant_jerk(h):
 def test_extrapolated_covariance_matches_the_filter_predicting_pure_noise():
     """A still joint through 0.5 deg white noise: the covariance of the filter's prediction
     h = 30 ms ahead (20 000 samples x 8 joints) equals F Σ Fᵀ within 5 % on the diagonal, and
-    is wider than Σ in q and qd."""
+    is wider than Σ in q and qd. The model's own q̈ (the practice filter off: on its joints the
+    q̈ noise part is the blend's measured error, test_sigma_parts)."""
     n, h = 8, 0.03
-    est = make_estimator("kalman", n, {"kalman_noise_deg": 0.5})
+    est = make_estimator("kalman", n, {"kalman_noise_deg": 0.5, "practice_filter": 0.0})
     src = state_source(est)
     z = np.random.default_rng(7).normal(0.0, math.radians(0.5), (20000, n))
     out = np.empty((len(z), 3, n))

@@ -24,7 +24,8 @@ recorder's default (reliable).
 Files: `output` (default forearm_YYYYmmdd_HHMMSS.mcap in the working directory) is
 never overwritten; a missing or unwritable directory is one error line and exit code 2 (USAGE).
 SIGINT/SIGTERM finish the file (summary, statistics; exit 0, OK), also during start-up (an
-empty, complete bag) and when a second signal arrives while the file is being closed.
+empty, complete bag) and when a second signal arrives while the file is being closed; the
+messages the readers already hold are written first (DRAIN_S at most).
 After SIGKILL the file holds every chunk closed before: chunks close at 1 MiB or every
 `flush_period` s (each closed chunk is logged at debug level with the messages it makes
 safe: `--log-level bag_recorder:=debug`). A write failure (disk full) logs one error
@@ -57,6 +58,8 @@ from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 from .spec import Settings
 
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
+#: seconds a stopped recorder may spend writing what its readers already hold
+DRAIN_S = 2.0
 # History a latched subscription takes over when it matches: trajectory_publisher keeps its
 # last 100 markers, the torque node its last config; a burst of history must not overwrite
 # itself in a reader of depth 1 before the callback takes it.
@@ -179,6 +182,9 @@ class BagRecorder(RealtimeNode, Node):
         self.done = Future()
         self.exit_code = OK
         self.executor_kind = "events"
+        # after SIGINT/SIGTERM, what the readers already hold is written too (common.spin's
+        # drain: until nothing came for 50 ms, at most DRAIN_S)
+        self.drain_on_stop = (DRAIN_S, lambda: self.writer.message_count if self.writer else 0)
         # SIGINT/SIGTERM never raise here (common.hold_stop_signals: they only request the
         # stop, which run() carries out after the spin): a write is never cut short, and a
         # stop during start-up finishes a made file as a complete bag (finish()).
