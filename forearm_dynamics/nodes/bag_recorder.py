@@ -58,8 +58,9 @@ from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 from .spec import Settings
 
 DEFAULT_TOPICS = ("joint_states", "joint_torques", "movement", "/diagnostics", CONFIG_TOPIC)
-#: seconds a stopped recorder may spend writing what its readers already hold
-DRAIN_S = 2.0
+#: seconds a stopped recorder may spend writing what its readers already hold (with a live
+#: stream it writes what keeps coming for that long: the stop waits DRAIN_S)
+DRAIN_S = 1.0
 # History a latched subscription takes over when it matches: trajectory_publisher keeps its
 # last 100 markers, the torque node its last config; a burst of history must not overwrite
 # itself in a reader of depth 1 before the callback takes it.
