@@ -129,15 +129,21 @@ class NoiseBelief:
         2 pi delay_practice_hz, or with coloured noise (band level > COLOURED_RATIO x white
         level; once in, down to KEEP_RATIO). A white joint filtered narrower passes nothing
         the practice removes, and the model, right for white noise, is kept."""
-        ne = self.noise_estimator
-        use, was = self._plag_use, self._plag_use_was
+        use = self._plag_use
         if not self.noise_known(False):  # the band level is the default belief, not measured:
             use.fill(False)  # no joint is known to be coloured or wide yet (a short exact movement)
             return
-        white = ne.white(self._tmp)
+        self._passes_what_the_practice_removes(use, self._plag_use_was, self._plag.cutoff_hz,
+                                               self.noise_estimator.period_s or self._dt)
+
+    def _passes_what_the_practice_removes(self, use: np.ndarray, was: np.ndarray, band_hz: float,
+                                          dt: float) -> None:
+        """Into `use`: the joints the model lets content above band_hz through on (the rule
+        of _practice_lag_joints, also the practice filter's: practice_output.py); `was` the
+        last answer (the coloured test's hysteresis), updated."""
+        white = self.noise_estimator.white(self._tmp)
         np.greater(white, EXACT_WHITE * self._floor, out=use)
-        dt = ne.period_s or self._dt
-        wide = self.psd / (self._r**2 * dt) > (2.0 * math.pi * self._plag.cutoff_hz) ** 6
+        wide = self.psd / (self._r**2 * dt) > (2.0 * math.pi * band_hz) ** 6
         coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
         use &= wide | coloured
         np.copyto(was, use)

@@ -27,12 +27,7 @@ _dt, psd, _r, _floor, noise_estimator and writes the output's q̈ row.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-
-from . import practice_lag
-from .noise_belief import COLOURED_RATIO, EXACT_WHITE
 
 #: seconds over which a joint's q̈ moves between the model's and the blend's
 FADE_S = 0.1
@@ -61,7 +56,7 @@ class PracticeOutput:
 
     def _practice_filter_joints(self) -> None:
         ne = self.noise_estimator
-        use, was = self._pf_use, self._pf_was
+        use = self._pf_use
         dt = ne.period_s or self._dt
         if not self.noise_known(False) or not ne.white_evaluations or dt > MAX_PERIOD_S:
             use.fill(False)
@@ -69,12 +64,7 @@ class PracticeOutput:
         self._pfir.configure(dt)
         self._pblend.configure(dt)
         self._pblend.update()
-        white = ne.white(self._tmp)
-        np.greater(white, EXACT_WHITE * self._floor, out=use)
-        wide = self.psd / (self._r**2 * dt) > (2.0 * math.pi * BAND_HZ) ** 6
-        coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
-        use &= wide | coloured
-        np.copyto(was, use)
+        self._passes_what_the_practice_removes(use, self._pf_was, BAND_HZ, dt)
         np.multiply(use, self._pf_share, out=self._pf_target)
 
     def _practice_filter_output(self, q: np.ndarray) -> None:
