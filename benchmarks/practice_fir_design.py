@@ -63,37 +63,44 @@ DECIMATIONS = (1, 2, 3)
 NOISE_TARGET = {"white": 1.0, "band_7_14_hz": 0.8}
 
 
+def _grams(st: np.ndarray, q: np.ndarray, cols, target: float = 1.0) -> tuple[float, list]:
+    """(period, per column the taps' Gram matrices against the practice's q̈ over the settled
+    window, each over the Butterworth's squared q̈ error there times target²)."""
+    dt = float(np.median(np.diff(st))) * 1e-9
+    _, _, a = realscore.practice(st, q)
+    bw = realscore.node_outputs(st, q, "butterworth", {"butterworth_cutoff_hz": 6.0})
+    idx = np.searchsorted(st, bw.stamps_ns)
+    keep = (st[idx] - st[0]) * 1e-9 >= realscore.SETTLE_S
+    settled = idx[keep]
+    K = practice_fir.taps_count(dt)
+    out = []
+    for c in cols:
+        A = practice_fir.differences(q[:, c], K)[settled]
+        y = a[settled, c]
+        e_bw = float(np.sum((bw.qdd[keep, c] - y) ** 2)) * target**2
+        out.append((A.T @ A / e_bw, A.T @ y / e_bw, float(y @ y) / e_bw))
+    return dt, out
+
+
 def series(recs, decimations=DECIMATIONS) -> list[dict]:
     """Per (recording, rate, measured DOF): the taps' Gram matrices against the practice's
     q̈, each over the Butterworth's squared q̈ error, over the settled window."""
     out = []
     for rec in recs:
         for dec in decimations if rec.source == "ue_adl" else (1,):
-            st, q = rec.stamps_ns[::dec], rec.q[::dec]
-            dt = float(np.median(np.diff(st))) * 1e-9
-            _, _, a = realscore.practice(st, q)
-            bw = realscore.node_outputs(st, q, "butterworth", {"butterworth_cutoff_hz": 6.0})
-            idx = np.searchsorted(st, bw.stamps_ns)
-            rel = (st - st[0]) * 1e-9
-            keep = rel[idx] >= realscore.SETTLE_S
-            settled = idx[keep]
-            K = practice_fir.taps_count(dt)
-            for c in rec.columns:
-                A = practice_fir.differences(q[:, c], K)[settled]
-                item = {"name": rec.name, "subject": rec.subject, "dec": dec, "dt": dt, "col": c}
-                y = a[settled, c]
-                e_bw = float(np.sum((bw.qdd[keep, c] - y) ** 2))
-                item["gram"] = (A.T @ A / e_bw, A.T @ y / e_bw, float(y @ y) / e_bw)
-                out.append(item)
+            dt, grams = _grams(rec.stamps_ns[::dec], rec.q[::dec], rec.columns)
+            out += [{"name": rec.name, "subject": rec.subject, "dec": dec, "dt": dt, "col": c, "gram": g}
+                    for c, g in zip(rec.columns, grams, strict=True)]
     return out
 
 
 def noise_series(rates=(100.0, 50.0, 100.0 / 3.0, 250.0, 1000.0), seconds: float = 60.0,
                  seed: int = 20261206) -> list[dict]:
     """Noise alone as more series to be no worse than the Butterworth on: white, and coloured
-    above the practice's band (7-14 Hz: soft-tissue artefact, marker jitter), per rate. A
-    kernel fitted on the recordings alone passed up to 20 x the Butterworth's q̈ at the
-    Nyquist frequency (they hold little there), and 0.6 x of a 7-14 Hz artefact."""
+    above the practice's band (7-14 Hz: soft-tissue artefact, marker jitter), per rate, each
+    scored against NOISE_TARGET x the Butterworth's error. A kernel fitted on the recordings
+    alone passed up to 20 x the Butterworth's q̈ at the Nyquist frequency (they hold little
+    there), and 0.6 x of a 7-14 Hz artefact."""
     from scipy.signal import butter, sosfilt
 
     rng = np.random.default_rng(seed)
@@ -101,25 +108,14 @@ def noise_series(rates=(100.0, 50.0, 100.0 / 3.0, 250.0, 1000.0), seconds: float
     for rate in rates:
         n = int(seconds * rate)
         st = 10**9 + np.round(np.arange(n) * 1e9 / rate).astype(np.int64)
-        dt = float(np.median(np.diff(st))) * 1e-9
         white = rng.standard_normal(n)
         band = sosfilt(butter(4, (7.0, min(14.0, 0.45 * rate)), "bandpass", fs=rate, output="sos"),
                        rng.standard_normal(n))
         for kind, x in (("white", white), ("band_7_14_hz", band)):
-            q = np.zeros((n, 1))
-            q[:, 0] = 1e-3 * x / np.std(x)
-            _, _, a = realscore.practice(st, q)
-            bw = realscore.node_outputs(st, q, "butterworth", {"butterworth_cutoff_hz": 6.0})
-            idx = np.searchsorted(st, bw.stamps_ns)
-            keep = (st[idx] - st[0]) * 1e-9 >= realscore.SETTLE_S
-            settled = idx[keep]
-            A = practice_fir.differences(q[:, 0], practice_fir.taps_count(dt))[settled]
-            y = a[settled, 0]
-            e_bw = float(np.sum((bw.qdd[keep, 0] - y) ** 2))
-            e_bw *= NOISE_TARGET[kind] ** 2  # scored against this fraction of the Butterworth's
+            q = (1e-3 * x / np.std(x))[:, None]
+            dt, (gram,) = _grams(st, q, [0], NOISE_TARGET[kind])
             out.append({"name": f"noise_{kind}", "subject": "noise", "dec": 0, "dt": dt, "col": 0,
-                        "gram": (A.T @ A / e_bw, A.T @ y / e_bw, float(y @ y) / e_bw),
-                        "target": NOISE_TARGET[kind]})
+                        "gram": gram, "target": NOISE_TARGET[kind]})
     return out
 
 
