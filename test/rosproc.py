@@ -87,6 +87,13 @@ def apply_to_this_process() -> None:
     os.environ.update({k: v for k, v in ros_env().items() if k.startswith(("ROS_", "HOME"))})
 
 
+class Hang(subprocess.TimeoutExpired):
+    """A process past its wait: the message carries its output (pytest shows str(exc))."""
+
+    def __str__(self) -> str:
+        return f"{super().__str__()}; its output:\n{self.output or '(none)'}"
+
+
 class NodeProcess(Child):
     """One started executable (processes.Child, stdout and stderr in files of their own),
     with the test-friendly names and strictness: wait() raises on timeout, stop() raises
@@ -111,9 +118,15 @@ class NodeProcess(Child):
         return self.wait_for(text, timeout)
 
     def wait(self, timeout: float = 30.0) -> int:
+        """The exit code; a process still running after `timeout` s raises TimeoutExpired
+        with its output, after one of our nodes printed its threads' stacks (SIGUSR1,
+        nodes/common.run): a hang says where it hangs."""
         code = super().wait(timeout)
         if code is None:
-            raise subprocess.TimeoutExpired(self.argv, timeout)
+            if self.argv[0].startswith(str(BIN)) and self.proc.poll() is None:
+                self.proc.send_signal(signal.SIGUSR1)
+                time.sleep(1.0)
+            raise Hang(self.argv, timeout, output=self.text()[-6000:])
         return code
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 60.0) -> int:

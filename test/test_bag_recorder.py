@@ -133,6 +133,18 @@ def test_sigterm_gives_a_complete_bag(tmp_path, processes) -> None:
     bag = open_bag(out)
     assert bag.info.complete
     counts = bag.info.topic_counts()
+    if counts["/joint_states"] != published:  # which ones: the first, the last, between?
+        from rclpy.serialization import deserialize_message
+        from sensor_msgs.msg import JointState
+
+        got = {deserialize_message(m.data, JointState).header.stamp.sec * 10**9
+               + deserialize_message(m.data, JointState).header.stamp.nanosec
+               for _c, m in bag.messages(["joint_states"])}
+        sent = [int(s) for s in stamps_file.read_text().split()]
+        missing = [i for i, s in enumerate(sent) if s not in got]
+        raise AssertionError(f"{len(got)} of {published} recorded; missing sample indices "
+                             f"{missing[:20]}; publisher: {log.read_text()[-500:]}; "
+                             f"recorder: {rec.output()[-1500:]}")
     assert counts["/joint_states"] == published >= 2500
     assert counts["/torque_node/config"] == 1  # latched, published before the recorder
     # markers published before the recorder: every one, in order (the CI failure: a recorder

@@ -46,6 +46,25 @@ def test_the_drain_writes_what_is_queued_then_stops(context, monkeypatch) -> Non
     assert time.monotonic() - t0 < 2 * common.DRAIN_IDLE_S + 0.5  # one idle wait, then out
 
 
+class TimerFirst(Queue):
+    """A timer's callback (no write) runs before each tenth message, as the recorder's flush
+    and discovery timers do between its readers' callbacks."""
+
+    turns = 0
+
+    def spin_once(self, timeout_sec: float) -> None:
+        self.turns += 1
+        if self.turns % 10 != 1:
+            super().spin_once(timeout_sec)
+
+
+def test_a_timer_turn_does_not_end_the_drain(context, monkeypatch) -> None:
+    monkeypatch.setattr(common.rclpy, "ok", lambda: context.ok())
+    q = TimerFirst(300)
+    common._drain(q, 2.0, lambda: q.written)
+    assert q.written == 300 and q.pending == 0
+
+
 def test_the_drain_ends_at_its_cap_when_messages_keep_coming(context, monkeypatch) -> None:
     monkeypatch.setattr(common.rclpy, "ok", lambda: context.ok())
     q = Queue(0, refill=True)

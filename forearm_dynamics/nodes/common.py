@@ -121,14 +121,20 @@ DRAIN_IDLE_S = 0.05
 
 
 def _drain(executor, seconds: float, progress: Callable[[], int]) -> None:
-    deadline = time.monotonic() + seconds
+    """Run callbacks until `progress()` has not moved for DRAIN_IDLE_S (wall time: a turn
+    that ran a timer's callback, not a message's, is no sign the readers are empty) or
+    `seconds` are up."""
+    start = idle_since = time.monotonic()
     last = progress()
-    while time.monotonic() < deadline and rclpy.ok():
-        executor.spin_once(timeout_sec=DRAIN_IDLE_S)
-        now = progress()
-        if now == last:
+    while rclpy.ok():
+        executor.spin_once(timeout_sec=DRAIN_IDLE_S / 5)
+        now, t = progress(), time.monotonic()
+        if now != last:
+            last, idle_since = now, t
+        elif t - idle_since >= DRAIN_IDLE_S or t - start >= seconds:
             return
-        last = now
+        if t - start >= seconds:
+            return
 
 
 #: how often the stop watcher looks at STOP (s): the stop's latency beyond the callback
