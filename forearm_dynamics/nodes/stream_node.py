@@ -63,6 +63,9 @@ from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 from .std_output import PerFrame
 
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
+#: s between looks at how many subscriptions the output's writer has matched (logged when
+#: it changes; get_subscription_count costs ~2 µs)
+MATCH_POLL_S = 0.1
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
 
 #: Why the default depth is 1000 (measured on this machine, Fast DDS on loopback, whatever
@@ -195,6 +198,14 @@ class JointStreamNode(RealtimeNode, Node):
         if s.diagnostics_period > 0:
             self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self.create_timer(s.diagnostics_period, self._publish_diagnostics)
+        # Who gets the output, as this writer sees it: an answer sent before a subscriber
+        # is matched here never reaches it (volatile), and discovery can take a participant
+        # announcement (~3 s) longer for one pair of nodes than for another (in a CI run the
+        # recorder missed the replay's first 92 answers, though the replay had seen it on
+        # joint_states 2 s before it started). Logged on each change: what a user, a demo or
+        # a test waits for before the stream starts.
+        self._matched = 0
+        self.create_timer(MATCH_POLL_S, self._log_matches)
         # First-call costs (shape parsing and checks, numpy paths) now, not on the first
         # sample: the usual shape (model joint order, positions + velocities) is cached.
         self._plan = self._shapes.find(OutputTemplate(self.joint_names, effort=False).payload())
@@ -203,6 +214,12 @@ class JointStreamNode(RealtimeNode, Node):
             f"(depth {s.qos_depth}, {_rel(s.input_reliable, s.output_reliable)}, "
             f"{s.executor} executor)"
         )
+
+    def _log_matches(self) -> None:
+        n = self.pub.get_subscription_count()
+        if n != self._matched:
+            self._matched = n
+            self.get_logger().info(f"{self.pub.topic_name}: matched by {n} subscriber(s)")
 
     def _init_ros_node(self, node_name: str) -> None:
         """rclpy's Node.__init__ (params.init_node); the managed node (lifecycle.py) made its
