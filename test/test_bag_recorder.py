@@ -17,14 +17,14 @@ from forearm_dynamics.bag import open_bag, recover
 pytestmark = pytest.mark.ros
 
 PUBLISHER = r"""
-import sys, time
+import os, sys, time
 import rclpy
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.duration import Duration
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-duration, stamps_file = float(sys.argv[1]), sys.argv[2]
+duration, stamps_file, go = float(sys.argv[1]), sys.argv[2], sys.argv[3]
 rclpy.init()
 node = rclpy.create_node("test_joint_state_publisher")
 latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -39,8 +39,13 @@ for k in range(3):
     markers.publish(String(data=f'{{"id": {k + 1}}}'))
 pub = node.create_publisher(JointState, "joint_states", QoSProfile(depth=1000))
 print("waiting", flush=True)
-deadline = time.monotonic() + 30
-while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+# Both sides of the match before the stream: this writer counts the recorder's reader, and
+# the test has seen the recorder log that its reader matched this writer (it then creates
+# `go`). Discovery is two one-way exchanges; a sample sent before the reader matched is
+# acknowledged and never delivered (a loaded run: the reader matched 3 s after this writer
+# counted it; another lost the first 477 samples). A hang guard, not a timing claim.
+deadline = time.monotonic() + 120
+while (pub.get_subscription_count() < 1 or not os.path.exists(go)) and time.monotonic() < deadline:
     rclpy.spin_once(node, timeout_sec=0.05)
 msg = JointState(name=[f"joint_{i}" for i in range(20)], position=[0.1] * 20, velocity=[0.0] * 20)
 stamps = []
@@ -53,12 +58,6 @@ def send():
     stamps.append(ns)
 
 
-# This writer matched the recorder; the recorder's reader may match this writer seconds later
-# (discovery is two one-way exchanges: a loaded run recorded 39 of 3001 samples after a fixed
-# 0.5 s wait). The first sample is acknowledged only once both sides matched: stream after.
-send()
-if not pub.wait_for_all_acked(Duration(seconds=120)):  # a hang guard
-    print("the first sample was never acknowledged", flush=True)
 start = time.perf_counter()
 print("publishing", time.time_ns(), flush=True)
 while (now := time.perf_counter()) - start < duration:
@@ -86,10 +85,18 @@ def private_domain() -> int:
 
 
 def start_publisher(tmp_path: Path, domain: int, duration: float) -> tuple[subprocess.Popen, Path, Path]:
+    """The publisher streams once `go_when_recording` has seen the recorder's reader match it."""
     stamps = tmp_path / "stamps.txt"
-    pub = rosproc.NodeProcess("publisher", [sys.executable, "-c", PUBLISHER, str(duration), str(stamps)],
-                              rosproc.ros_env(domain), tmp_path)
+    pub = rosproc.NodeProcess("publisher", [sys.executable, "-c", PUBLISHER, str(duration), str(stamps),
+                                            str(tmp_path / "go")], rosproc.ros_env(domain), tmp_path)
     return pub.proc, stamps, pub.log
+
+
+def go_when_recording(rec, tmp_path: Path) -> None:
+    """Let the publisher stream once the recorder's joint_states reader has matched it."""
+    assert rec.wait_for_output("/joint_states: recording from 1 publisher(s)", rosproc.STARTUP_S), \
+        rec.output()
+    (tmp_path / "go").touch()
 
 
 def wait_for(path: Path, text: str, timeout: float = 30.0) -> str:
@@ -124,6 +131,7 @@ def test_sigterm_gives_a_complete_bag(tmp_path, processes) -> None:
     out = tmp_path / "run.mcap"
     rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=domain)
     processes.append(rec)
+    go_when_recording(rec, tmp_path)
     assert pub.wait(timeout=40) == 0, log.read_text()
     published = len(stamps_file.read_text().split())
     time.sleep(0.3)
@@ -175,6 +183,7 @@ def test_sigkill_keeps_the_closed_chunks(tmp_path, processes) -> None:
     out = tmp_path / "killed.mcap"
     rec = rosproc.start("bag_recorder", "-p", f"output:={out}", domain=domain)
     processes.append(rec)
+    go_when_recording(rec, tmp_path)
     wait_for(log, "publishing")
     time.sleep(2.0)
     kill_ns = time.time_ns()

@@ -30,7 +30,9 @@ def run(tmp_path_factory):
         # the recorder gets every answer once the node's writer has matched it (a CI run
         # that started on the replay's count of joint_states readers alone lost 92)
         assert node.wait_for_output("/joint_torques: matched by 1", STARTUP_S), node.output()
-        pub = start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}", "-p", "start_delay:=2.0",
+        # the default start_delay (5 s): the publisher counts its readers from its side, and
+        # a reader can match it a participant announcement (~3 s) later (docs/ros.md)
+        pub = start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}",
                     "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=30.0")
         assert pub.wait(timeout=90) == 0, pub.output()
     finally:

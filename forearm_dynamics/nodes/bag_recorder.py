@@ -197,15 +197,17 @@ class BagRecorder(RealtimeNode, Node):
             self._depth = depth
             self._streams: list[tuple[TopicPlan, str, int]] = []  # reliable until adapted
             self._muted: set[int] = set()  # channels whose reliable subscription is replaced
+            self._readers: dict[str, tuple] = {}  # stream topic -> (subscription, publishers)
             for plan, topic in zip(plans, resolved, strict=True):
                 qos = latched_qos(LATCHED_DEPTH) if plan.latched else stream_qos(depth)
                 channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
                 cb = self._callback(channel, None if plan.latched else self._muted)
-                self.create_subscription(plan.msg_class, topic, cb, qos, raw=True)
+                sub = self.create_subscription(plan.msg_class, topic, cb, qos, raw=True)
                 if not plan.latched:
                     self._streams.append((plan, topic, channel))
+                    self._readers[topic] = (sub, 0)
             self.create_timer(flush_period, self._flush_if_due)
-            self.create_timer(DISCOVERY_POLL_S, self._adapt_qos)
+            self.create_timer(DISCOVERY_POLL_S, self._look_at_publishers)
         except BagWriteError as exc:
             if self.writer is not None:
                 self.writer.abort()
@@ -240,6 +242,24 @@ class BagRecorder(RealtimeNode, Node):
 
         return on_message
 
+    def _look_at_publishers(self) -> None:
+        self._adapt_qos()
+        self._log_matches()
+
+    def _log_matches(self) -> None:
+        """Log '<topic>: recording from N publisher(s)' when a stream reader's count of
+        matched publishers changes (this reader's side of the match). Discovery is two
+        one-way exchanges: a publisher can count this reader seconds before this reader has
+        matched it, and what it sends meanwhile is not recorded, though the publisher sees
+        it acknowledged (a loaded test run lost the stream's first 477 samples so). A
+        stream that must be recorded from its first sample starts after this line, as
+        rosbag2's 'Subscribed to topic' is waited for."""
+        for topic, (sub, known) in self._readers.items():
+            n = sub.get_publisher_count()
+            if n != known:
+                self._readers[topic] = (sub, n)
+                self.get_logger().info(f"{topic}: recording from {n} publisher(s)")
+
     def _adapt_qos(self) -> None:
         """Adapt each stream subscription to what its publishers offer, as `ros2 bag record`
         does: it starts reliable (matched from the first sample, as before); once a
@@ -257,8 +277,9 @@ class BagRecorder(RealtimeNode, Node):
             # ("incompatible") cannot be destroyed safely (InvalidHandle in the executor); it
             # is muted (its callback drops what reliable writers still send it: no duplicates).
             self._muted.add(channel)
-            self.create_subscription(plan.msg_class, topic, self._callback(channel),
-                                     stream_qos(self._depth, False), raw=True)
+            sub = self.create_subscription(plan.msg_class, topic, self._callback(channel),
+                                           stream_qos(self._depth, False), raw=True)
+            self._readers[topic] = (sub, 0)
             self._streams.remove(item)
             self.get_logger().info(f"{topic}: subscribed best effort, as its publisher(s) offer")
 
