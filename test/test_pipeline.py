@@ -27,9 +27,11 @@ def run(tmp_path_factory):
     pub = None
     try:
         assert node.wait_for_output("config on", STARTUP_S), node.output()
-        # the recorder gets every answer once the node's writer has matched it (a CI run
-        # that started on the replay's count of joint_states readers alone lost 92)
+        # the recorder gets every answer once both sides have matched: the node's writer
+        # it, and its reader the node (a CI run that started on the replay's count of
+        # joint_states readers alone lost 92)
         assert node.wait_for_output("/joint_torques: matched by 1", STARTUP_S), node.output()
+        assert rec.wait_for_output("/joint_torques: recording from 1", STARTUP_S), rec.output()
         # the default start_delay (5 s): the publisher counts its readers from its side, and
         # a reader can match it a participant announcement (~3 s) later (docs/ros.md)
         pub = start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}",

@@ -50,8 +50,10 @@ def record(bag, *player_cmd) -> None:
     try:
         assert node.wait_for_output("config on", STARTUP_S), node.output()
         assert rec.wait_for_output("recording", STARTUP_S), rec.output()
-        # every answer recorded: the node's writer has matched the recorder (docs/ros.md)
+        # every answer recorded: the node's writer and the recorder's reader have matched
+        # each other (docs/ros.md)
         assert node.wait_for_output("joint_torques: matched by 1", STARTUP_S), node.output()
+        assert rec.wait_for_output("joint_torques: recording from 1", STARTUP_S), rec.output()
         player = player_cmd[0](*player_cmd[1:])
         assert player.wait(timeout=120) == 0, player.output()
     finally:

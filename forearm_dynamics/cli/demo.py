@@ -71,9 +71,11 @@ def main(argv: list[str] | None = None) -> int:
         if not wait_for_listeners(env, "joint_states", 2, timeout=30.0):
             return die("demo: torque_node and bag_recorder did not come up; see " + str(out / "logs"))
         # the recorder gets the torques from the first sample once the torque node's writer
-        # has matched it (the node logs it; discovery between two nodes can take seconds)
-        if not children[0].wait_for("/joint_torques: matched by 1", timeout=30.0):
-            return die("demo: bag_recorder never subscribed to torque_node's /joint_torques; see "
+        # and its reader have matched each other (both log it; discovery between two nodes
+        # can take seconds)
+        if not (children[0].wait_for("/joint_torques: matched by 1", timeout=30.0)
+                and children[1].wait_for("/joint_torques: recording from 1", timeout=30.0)):
+            return die("demo: bag_recorder and torque_node never matched on /joint_torques; see "
                        + str(out / "logs"))
         n = len(ids) or 65
         print(f"demo: replaying {n} movements at 1 kHz (~{n * 1.5:.0f} s)...", flush=True)
