@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rosproc
 from rosproc import BIN, STARTUP_S, ros_env, start
 
 from forearm_dynamics import JOINT_NAMES, build_model, exit_codes, get_movement
@@ -22,8 +23,11 @@ MOVEMENTS = [3, 9, 19, 30, 55]  # elbow 90, 0 (supination), flexing, extending, 
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("pipeline")
     bag = out / "run.mcap"
-    node = start("torque_node")
-    rec = start("bag_recorder", "-p", f"output:={bag}")
+    # a domain of its own: the match counts waited for below are these nodes' alone (in the
+    # session's shared domain another test's subscriber made the node's count 2)
+    domain = rosproc.test_domain(140, 229)
+    node = start("torque_node", domain=domain)
+    rec = start("bag_recorder", "-p", f"output:={bag}", domain=domain)
     pub = None
     try:
         assert node.wait_for_output("config on", STARTUP_S), node.output()
@@ -35,7 +39,7 @@ def run(tmp_path_factory):
         # the default start_delay (5 s): the publisher counts its readers from its side, and
         # a reader can match it a participant announcement (~3 s) later (docs/ros.md)
         pub = start("trajectory_publisher", "-p", f"movements:={MOVEMENTS}",
-                    "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=30.0")
+                    "-p", "min_subscribers:=2", "-p", "subscriber_timeout:=30.0", domain=domain)
         assert pub.wait(timeout=90) == 0, pub.output()
     finally:
         if pub is not None and pub.running():
