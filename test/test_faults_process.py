@@ -178,12 +178,22 @@ def processed_all_received(output: str) -> int | None:
     return int(m.group(1)) if m is not None and m.group(1) == m.group(2) else None
 
 
+def torques_matched(node, rec) -> None:
+    """Both sides of the joint_torques match between torque_node and the recorder, before
+    the stream: the node's writer counts the Watch's reader and the recorder's (2), the
+    recorder's reader the node. An answer sent before both sides matched is not recorded
+    (a CI run: the reference recorder's first torque was not the node's first answer)."""
+    assert node.wait_for_output("/joint_torques: matched by 2", rosproc.STARTUP_S), node.output()
+    assert rec.wait_for_output("/joint_torques: recording from 1", rosproc.STARTUP_S), rec.output()
+
+
 def start_pipeline(procs: Procs, tmp: Path, domain: int):
     node = procs.start("torque_node", *NODE_ARGS, domain=domain)
     rec = procs.start("bag_recorder", "-p", f"output:={tmp / 'run.mcap'}", *DEPTH, domain=domain)
     # start-up is imports and a model build: seconds, tens of seconds at load 11 (hang guard)
     assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
     assert rec.wait_for_output("recording", rosproc.STARTUP_S), rec.output()
+    torques_matched(node, rec)
     pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain)
     return node, rec, pub
 
@@ -399,6 +409,7 @@ def test_recorder_stopped_at_random_points(procs, tmp_path) -> None:
         ref = procs.start("bag_recorder", "-p", f"output:={ref_path}", *DEPTH, domain=domain)
         assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
         assert ref.wait_for_output("recording", rosproc.STARTUP_S), ref.output()
+        torques_matched(node, ref)  # the reference holds the node's first answer
         pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain)
         watch.wait_torques(300)  # the pipeline runs before the recorders under test join
     finally:
