@@ -84,8 +84,10 @@ def spin(node: Node, executor=None, timeout_sec: float = 0.5, done: Future | Non
     drain (seconds, progress): after a stop signal, the callbacks already queued (messages
     the readers hold: received and acknowledged, not yet taken) run too, one at a time, until
     `progress()` (e.g. messages written) stops moving for DRAIN_IDLE_S or the seconds are up.
-    A recorder stopped 0.3 s after its publisher under load missed the last sample (3 000 of
-    3 001: CI, 2026-12-06); a torque node's backlog is not drained (its answers are late).
+    A stopped recorder thus keeps what its readers held at the signal (the CI loss of 3 000
+    of 3 001 this was first written for turned out to be the stream's first sample, a late
+    match: bag_recorder._log_matches); a torque node's backlog is not drained (its answers
+    are late).
     """
     executor = executor or make_executor()
     wake = Future()
@@ -131,7 +133,7 @@ def _drain(executor, seconds: float, progress: Callable[[], int]) -> None:
         now, t = progress(), time.monotonic()
         if now != last:
             last, idle_since = now, t
-        elif t - idle_since >= DRAIN_IDLE_S or t - start >= seconds:
+        elif t - idle_since >= DRAIN_IDLE_S:
             return
         if t - start >= seconds:
             return
