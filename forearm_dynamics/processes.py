@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -234,14 +235,16 @@ class Child:
         """Everything the process printed so far."""
         return self.stdout() + self.stderr()
 
-    def wait_for(self, text: str, timeout: float) -> bool:
-        """True once `text` is in the output; False on timeout or exit without it."""
+    def wait_for(self, text: str, timeout: float, *, regex: bool = False) -> bool:
+        """True once `text` is in the output (with `regex`, a match of that pattern); False
+        on timeout or exit without it."""
+        found = re.compile(text).search if regex else (lambda out: text in out)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if text in self.text():
+            if found(self.text()):
                 return True
             if not self.running():
-                return text in self.text()
+                return bool(found(self.text()))
             time.sleep(0.05)
         return False
 

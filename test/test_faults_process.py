@@ -283,6 +283,13 @@ def test_torque_node_killed_and_restarted(procs, tmp_path) -> None:
         # up first (its start-up alone took > 40 s at load 11 in a full run: the old single
         # 40 s wait failed there with 0 torques), then serving
         assert node2.wait_for_output("config on", rosproc.STARTUP_S), node2.output()
+        # both of its streams matched, as the node sees them (each side logs its own count;
+        # a CI run beside a second suite once saw 0 answers in 120 s here, cause unknown:
+        # a failure now says which side never matched)
+        assert node2.wait_for_output("/joint_states: receiving from 1", rosproc.STARTUP_S), \
+            node2.output()
+        assert node2.wait_for_output("/joint_torques: matched by", rosproc.STARTUP_S), \
+            node2.output()
         watch.wait_torques(1500)  # it came back and serves
         diag = watch.diag.fresh()
         # The recorder may discover the new node only at Fast DDS's next participant

@@ -120,6 +120,8 @@ def test_start_wait_for_and_stop(tmp_path) -> None:
         assert "to stderr" in a.stdout() and a.stderr() == ""  # together unless split
         assert "to stderr" not in b.stdout() and b.stderr().strip() == "to stderr"
         assert a.running() and a.wait(0.1) is None and not a.wait_for("never printed", 0.3)
+        assert a.wait_for(r"rea[d]y", 1, regex=True) and not a.wait_for(r"rea[d]y", 0.3)
+        assert not a.wait_for(r"ready\d", 0.3, regex=True)
         assert proc_stat(a.pid) is not None and proc_stat(a.pid).rss_kb > 0
     finally:
         assert a.stop() == -signal.SIGINT or a.returncode == 1  # KeyboardInterrupt in sleep

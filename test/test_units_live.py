@@ -44,10 +44,10 @@ def test_live_stream_of_degrees_is_refused_naming_units(procs):
         # the node's start-up lines end with the model's ("... config on /torque_node/config");
         # its subscription may match before it is logged: wait for it (a hang guard)
         assert proc.wait_for_output("config on", rosproc.STARTUP_S), proc.output()
-        # and the node's writer has matched this peer (it logs it): nothing else is said
-        # once the stream starts
-        assert proc.wait_for_output("/joint_torques: matched by 1", rosproc.STARTUP_S), \
-            proc.output()
+        # and the node has matched this peer on both topics (it logs each side): nothing
+        # else is said once the stream starts
+        for line in ("/joint_torques: matched by 1", "/joint_states: receiving from 1"):
+            assert proc.wait_for_output(line, rosproc.STARTUP_S), proc.output()
         mark = len(proc.output())
         mv = movement_library()[0]
         t = mv.sample_times(1000.0)[:300]

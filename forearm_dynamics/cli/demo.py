@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import subprocess
 import sys
 import time
@@ -39,19 +38,6 @@ def wait_for_listeners(env: dict, topic: str, count: int, timeout: float) -> boo
     )
     return subprocess.run([sys.executable, "-c", code], env=env, timeout=timeout + 30,
                           check=False).returncode == OK
-
-
-def _logged(child: Child, pattern: str, timeout: float) -> bool:
-    """Whether `child` logs a line matching `pattern` within `timeout` s (a count of 1 or
-    more: another program's subscriber in the same domain may be counted too)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if re.search(pattern, child.text()):
-            return True
-        if not child.running():
-            return False
-        time.sleep(0.05)
-    return False
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -86,9 +72,11 @@ def main(argv: list[str] | None = None) -> int:
             return die("demo: torque_node and bag_recorder did not come up; see " + str(out / "logs"))
         # the recorder gets the torques from the first sample once the torque node's writer
         # and its reader have matched each other (both log it; discovery between two nodes
-        # can take seconds)
-        if not (_logged(children[0], r"/joint_torques: matched by [1-9]", 30.0)
-                and _logged(children[1], r"/joint_torques: recording from [1-9]", 30.0)):
+        # can take seconds); a count of 1 or more: another program's subscriber in the same
+        # domain counts too
+        if not (children[0].wait_for(r"/joint_torques: matched by [1-9]", 30.0, regex=True)
+                and children[1].wait_for(r"/joint_torques: recording from [1-9]", 30.0,
+                                         regex=True)):
             return die("demo: bag_recorder and torque_node never matched on /joint_torques; see "
                        + str(out / "logs"))
         n = len(ids) or 65

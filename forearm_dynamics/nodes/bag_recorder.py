@@ -52,7 +52,7 @@ from ..bag.schemas import message_class, type_name_of
 from ..bag.writer import COMPRESSION
 from ..errors import BagError, BagWriteError
 from ..exit_codes import DATA, OK
-from .common import CONFIG_TOPIC, latched_qos, main_for, stream_qos
+from .common import CONFIG_TOPIC, MatchLog, latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, Spec, init_node
 from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 from .spec import Settings
@@ -197,7 +197,7 @@ class BagRecorder(RealtimeNode, Node):
             self._depth = depth
             self._streams: list[tuple[TopicPlan, str, int]] = []  # reliable until adapted
             self._muted: set[int] = set()  # channels whose reliable subscription is replaced
-            self._readers: dict[str, tuple] = {}  # stream topic -> (subscription, publishers)
+            self._matches: dict[str, MatchLog] = {}  # stream topic -> its reader's count
             for plan, topic in zip(plans, resolved, strict=True):
                 qos = latched_qos(LATCHED_DEPTH) if plan.latched else stream_qos(depth)
                 channel = self.writer.add_topic(topic, type_name_of(plan.msg_class), _topic_qos(qos))
@@ -205,7 +205,7 @@ class BagRecorder(RealtimeNode, Node):
                 sub = self.create_subscription(plan.msg_class, topic, cb, qos, raw=True)
                 if not plan.latched:
                     self._streams.append((plan, topic, channel))
-                    self._readers[topic] = (sub, 0)
+                    self._matches[topic] = self._match_log(topic, sub)
             self.create_timer(flush_period, self._flush_if_due)
             self.create_timer(DISCOVERY_POLL_S, self._look_at_publishers)
         except BagWriteError as exc:
@@ -244,21 +244,14 @@ class BagRecorder(RealtimeNode, Node):
 
     def _look_at_publishers(self) -> None:
         self._adapt_qos()
-        self._log_matches()
+        for log in self._matches.values():
+            log()
 
-    def _log_matches(self) -> None:
-        """Log '<topic>: recording from N publisher(s)' when a stream reader's count of
-        matched publishers changes (this reader's side of the match). Discovery is two
-        one-way exchanges: a publisher can count this reader seconds before this reader has
-        matched it, and what it sends meanwhile is not recorded, though the publisher sees
-        it acknowledged (a loaded test run lost the stream's first 477 samples so). A
-        stream that must be recorded from its first sample starts after this line, as
-        rosbag2's 'Subscribed to topic' is waited for."""
-        for topic, (sub, known) in self._readers.items():
-            n = sub.get_publisher_count()
-            if n != known:
-                self._readers[topic] = (sub, n)
-                self.get_logger().info(f"{topic}: recording from {n} publisher(s)")
+    def _match_log(self, topic: str, sub) -> MatchLog:
+        """'<topic>: recording from N publisher(s)' on each change of this reader's count of
+        matched publishers (its own side of the match: common.MatchLog)."""
+        return MatchLog(self, sub.get_publisher_count,
+                        lambda n: f"{topic}: recording from {n} publisher(s)")
 
     def _adapt_qos(self) -> None:
         """Adapt each stream subscription to what its publishers offer, as `ros2 bag record`
@@ -279,7 +272,7 @@ class BagRecorder(RealtimeNode, Node):
             self._muted.add(channel)
             sub = self.create_subscription(plan.msg_class, topic, self._callback(channel),
                                            stream_qos(self._depth, False), raw=True)
-            self._readers[topic] = (sub, 0)
+            self._matches[topic] = self._match_log(topic, sub)
             self._streams.remove(item)
             self.get_logger().info(f"{topic}: subscribed best effort, as its publisher(s) offer")
 

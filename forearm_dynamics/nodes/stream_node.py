@@ -55,7 +55,7 @@ from ..estimation.stamps import (
 )
 from ..gcwatch import GcWatch
 from . import validation as v
-from .common import CONFIG_TOPIC, EXECUTORS, stream_qos
+from .common import CONFIG_TOPIC, EXECUTORS, MATCH_POLL_S, MatchLog, stream_qos
 from .diagnostics import PipelineStats, diagnostic_array
 from .input_plans import GENERIC, InputPlan, InputPlans
 from .params import Params, Spec, init_node
@@ -65,7 +65,6 @@ from .std_output import PerFrame
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
 #: s between looks at how many subscriptions the output's writer has matched (logged when
 #: it changes; get_subscription_count costs ~2 µs)
-MATCH_POLL_S = 0.1
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
 
 #: Why the default depth is 1000 (measured on this machine, Fast DDS on loopback, whatever
@@ -198,13 +197,19 @@ class JointStreamNode(RealtimeNode, Node):
         if s.diagnostics_period > 0:
             self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self.create_timer(s.diagnostics_period, self._publish_diagnostics)
-        # Who gets the output, as this writer sees it: an answer sent before a subscriber
-        # is matched here never reaches it (volatile), and discovery can take a participant
-        # announcement (~3 s) longer for one pair of nodes than for another (in a CI run the
-        # recorder missed the replay's first 92 answers, though the replay had seen it on
-        # joint_states 2 s before it started). Logged on each change: what a user, a demo or
-        # a test waits for before the stream starts.
-        self._matched = 0
+        # Who gets the output, as this writer sees it, and whom the input comes from, as this
+        # reader sees it: a sample sent before the other side is matched here never arrives
+        # (volatile), and discovery can take a participant announcement (~3 s) longer for one
+        # pair of nodes than for another (in a CI run the recorder missed the replay's first
+        # 92 answers, though the replay had seen it on joint_states 2 s before it started).
+        # Logged on each change (common.MatchLog): what a user, a demo or a test waits for
+        # before the stream starts.
+        out_topic, in_topic = self.pub.topic_name, self.sub.topic_name
+        self._matches = (
+            MatchLog(self, self.pub.get_subscription_count,
+                     lambda n: f"{out_topic}: matched by {n} subscriber(s)"),
+            MatchLog(self, self.sub.get_publisher_count,
+                     lambda n: f"{in_topic}: receiving from {n} publisher(s)"))
         self.create_timer(MATCH_POLL_S, self._log_matches)
         # First-call costs (shape parsing and checks, numpy paths) now, not on the first
         # sample: the usual shape (model joint order, positions + velocities) is cached.
@@ -216,10 +221,8 @@ class JointStreamNode(RealtimeNode, Node):
         )
 
     def _log_matches(self) -> None:
-        n = self.pub.get_subscription_count()
-        if n != self._matched:
-            self._matched = n
-            self.get_logger().info(f"{self.pub.topic_name}: matched by {n} subscriber(s)")
+        for log in self._matches:
+            log()
 
     def _init_ros_node(self, node_name: str) -> None:
         """rclpy's Node.__init__ (params.init_node); the managed node (lifecycle.py) made its
