@@ -2,7 +2,7 @@
 
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 PACKAGE = "forearm_dynamics"
 
@@ -29,10 +29,18 @@ EXECUTABLES = {
     "bag_muscles": "forearm_dynamics.cli.bag_muscles:main",
 }
 
+# The Kalman filter's per-sample arithmetic in C (estimation/kalman_step.py says why);
+# optional: without a C compiler the install goes on and the filter runs numpy's way.
+# -ffp-contract=off: no fused multiply-add, every product and sum rounded as numpy rounds it.
+KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
+                        [f"{PACKAGE}/estimation/_kalman_step.c"],
+                        extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
+
 setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "benchmarks", "benchmarks.*"]),
+    ext_modules=[KALMAN_STEP],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -246,7 +246,8 @@ def test_a_refused_sample_never_enters_the_state(name, bad) -> None:
     for k in range(60):
         a.update(int(t[k]), q[k], qd[k] if vel else None)
         b.update(int(t[k]), q[k], qd[k] if vel else None)
-    before = copy.deepcopy(a.__dict__)
+    # the state as copy and pickle see it (the Kalman's compiled step is bound to its arrays)
+    before = copy.deepcopy(a.__getstate__())
     bad_q, bad_qd, stamp = q[60].copy(), qd[60].copy(), int(t[60])
     if bad == "nan_q":
         bad_q[1] = np.nan

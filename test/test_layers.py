@@ -68,9 +68,17 @@ def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
     return out
 
 
+def extensions(root: Path = ROOT) -> set[str]:
+    """The C extension modules (setup.py builds each from the .c source of its name): they
+    import nothing of the package."""
+    return {module_name(p, root) for p in root.rglob("*.c")}
+
+
 def graph(root: Path = ROOT) -> dict[str, set[str]]:
     mods = modules(root)
-    return {m: imports_of(m, p, set(mods)) for m, p in mods.items()}
+    known = set(mods) | extensions(root)
+    return {**{m: imports_of(m, p, known) for m, p in mods.items()},
+            **{m: set() for m in extensions(root)}}
 
 
 def layer_of(module: str, g: dict[str, set[str]]) -> str:

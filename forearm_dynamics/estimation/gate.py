@@ -79,11 +79,16 @@ class JumpGate:
         out += SPIKE_FLOOR_RAD
         return out
 
-    def check(self, e: np.ndarray, sigma: np.ndarray) -> bool:
+    def check(self, e: np.ndarray, sigma: np.ndarray, emax: float | None = None) -> bool:
         """Innovations e (n,) with stds sigma (n,): hold the joints beyond the gate (sets
-        `held`, `pending`, `jump`); True if any joint is held."""
+        `held`, `pending`, `jump`); True if any joint is held. emax: max |e| if the caller
+        has it (the compiled predict: kalman_step.py)."""
+        if emax is not None:
+            if emax <= SPIKE_FLOOR_RAD or not self._left:
+                return False
+            np.abs(e, out=self._abs)
         # cheap on most samples: the ufunc's reduce, not ndarray.max's Python wrapper
-        if _max(np.abs(e, out=self._abs)) <= SPIKE_FLOOR_RAD or not self._left:
+        elif _max(np.abs(e, out=self._abs)) <= SPIKE_FLOOR_RAD or not self._left:
             return False
         lim = self.limit(sigma, self._lim)
         np.greater(self._abs, lim, out=self.held)

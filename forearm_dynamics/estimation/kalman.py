@@ -3,7 +3,9 @@
 The parts, each in its own module and tested alone: the model and its discretisation
 (ca_model.py), the per-joint noise estimator (noise.py), the jump gate (gate.py), the
 fixed-lag smoother (smoother.py), and two mixins of the filter: its noise groups and their
-covariance recursions (noise_groups.py) and its per-joint noise belief (noise_belief.py).
+covariance recursions (noise_groups.py) and its per-joint noise belief (noise_belief.py);
+the per-sample arithmetic (predict, innovations, correction) runs as two compiled calls
+where the C extension is built (kalman_step.py), numpy's way otherwise.
 This module is the filter that wires them.
 
 Filter: state X = [q; qd; qdd] (3, n); per sample X = F X (predict), X += K (.) E (correct
@@ -99,7 +101,7 @@ import math
 
 import numpy as np
 
-from . import ca_model, practice_lag
+from . import ca_model, kalman_step, practice_lag
 from .base import SettingSpec, StateEstimator
 from .ca_model import process_noise, steady_state, transition  # noqa: F401 - public API
 from .delayed_output import DelayedOutput
@@ -224,7 +226,23 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
         self._pend_q = np.zeros(n)
         self._pend_qd = np.zeros(n)
         self._pend_vel = False
+        # predict, innovations, correction and the copies after it as two compiled calls on
+        # these arrays (kalman_step.py; None: numpy's way)
+        self._fast = kalman_step.bind(self._X, self._T3, self._E, self._Kp, self._Kv, self._out,
+                                      self._pend_q, self._pend_qd)
         self.reset()
+
+    def __getstate__(self) -> dict:
+        """Copies and pickles without the compiled step (bound to this filter's arrays)."""
+        state = self.__dict__.copy()
+        state["_fast"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.q, self.qd, self.qdd = self._out  # views again (a copy made them arrays of their own)
+        self._fast = kalman_step.bind(self._X, self._T3, self._E, self._Kp, self._Kv, self._out,
+                                      self._pend_q, self._pend_qd)
 
     # -- public state ---------------------------------------------------------------------
     @property
@@ -309,10 +327,9 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
         if vel != self._vel or not self._groups:
             self._regroup(vel, dt)
         x, f, t3, e = self._X, self._F, self._T3, self._E
-        f[0, 1] = f[1, 2] = dt
-        f[0, 2] = 0.5 * dt * dt
-        np.dot(f, x, out=t3)  # predict
-        if gate.pending:  # the sample before was held back: what was it?
+        predicted = gate.pending
+        if predicted:  # the sample before was held back: what was it?
+            self._predict(dt)
             np.subtract(q, t3[0], out=e[0])
             genuine = gate.resolve(e[0], self._sig)
             if gate.jump:  # a discontinuity: restart from the held sample, then take this one
@@ -322,9 +339,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
                 self._restart_windows()
                 self._start(self._held_t, self._held_q, self._held_qd if vel else None)
                 dt = (t_ns - self._t_ns) * 1e-9
-                f[0, 1] = f[1, 2] = dt
-                f[0, 2] = 0.5 * dt * dt
-                np.dot(f, x, out=t3)
+                self._predict(dt)
             elif genuine.any():  # restore its correction exactly: F K e one sample late
                 corr = self._tmp3
                 np.multiply(self._Kp, self._held_e[0] * genuine, out=corr)
@@ -339,11 +354,21 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
                 t3 += f @ corr
         self._dt = dt
         self._t_ns = t_ns
-        self._covariance_step(dt, vel)
-        np.subtract(q, t3[0], out=e[0])
-        if vel:
-            np.subtract(qd, t3[1], out=e[1])
-        held = self._armed and gate.check(e[0], self._sig)
+        self._covariance_step(dt, vel)  # the gains at dt (x and t3 untouched)
+        fast = self._fast
+        emax = None
+        if fast is not None and not predicted:  # predict and innovations: one compiled call
+            try:
+                emax = fast.predict_innovate(q, qd, dt)
+            except (TypeError, ValueError, BufferError):  # not contiguous float64: numpy's way
+                pass
+        if emax is None:
+            if not predicted:
+                self._predict(dt)
+            np.subtract(q, t3[0], out=e[0])
+            if vel:
+                np.subtract(qd, t3[1], out=e[1])
+        held = self._armed and gate.check(e[0], self._sig, emax)
         if held:
             h = gate.held
             np.copyto(self._held_q, q)
@@ -355,11 +380,23 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
             if gate.jump:  # exact input (the joints' measured noise at the floor): a real jump
                 measured = self.noise_estimator.white(self._tmp)  # no movement near Nyquist
                 self._jump_exact = bool((measured[h] <= 2.0 * self._floor).all())
-        np.multiply(self._Kp, e[0], out=x)  # correct
-        if vel:
-            np.multiply(self._Kv, e[1], out=self._tmp3)
-            x += self._tmp3
-        x += t3
+        self._since_noise += dt
+        due = self._since_noise >= NOISE_EVERY_S
+        # the noise statistics take this sample now (a noise update, or no rate yet) or after
+        # the output (learn(): a copy, the caller may reuse q and qd)
+        defer = not due and self.noise_estimator.period_s
+        copied = False  # the copies the compiled correction made: the output, the deferred sample
+        if fast is not None:  # correct
+            copied = emax is not None and not held  # (q, qd: arrays the step took)
+            keep = copied and defer
+            fast.correct(vel, q if keep else None, qd if keep and vel else None,
+                         copied and self.delay_s <= 0.0)
+        else:
+            np.multiply(self._Kp, e[0], out=x)
+            if vel:
+                np.multiply(self._Kv, e[1], out=self._tmp3)
+                x += self._tmp3
+            x += t3
         self._count += 1
         qin = np.where(gate.held, t3[0], q) if held else q  # a held joint: the prediction
         if self._plag is not None and not vel:
@@ -370,17 +407,16 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
                 self._pblend.configure(dt)
             self._pfir.push(t_ns, qin)
             self._pf_q = qin
-        self._since_noise += dt
-        due = self._since_noise >= NOISE_EVERY_S
-        if due or not self.noise_estimator.period_s:  # a noise update or no rate yet: now
-            self.noise_estimator.add(t_ns, qin, qd)  # the noise statistics see it too
-        else:  # after the output (learn()): a copy, the caller may reuse q and qd
+        if not defer:
+            self.noise_estimator.add(t_ns, qin, qd)
+        else:
             self._pending = True
             self._pend_t = t_ns
-            np.copyto(self._pend_q, qin)
             self._pend_vel = vel
-            if vel:
-                np.copyto(self._pend_qd, qd)
+            if not copied:
+                np.copyto(self._pend_q, qin)
+                if vel:
+                    np.copyto(self._pend_qd, qd)
         if due:
             self._since_noise = 0.0
             gate.new_window()
@@ -389,12 +425,21 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
                 self._practice_lag_joints()
             if self._pfir is not None and not vel:
                 self._practice_filter_joints()
-        return self._output(t_ns, self._count >= (2 if vel else 3), vel)
+        return self._output(t_ns, self._count >= (2 if vel else 3), vel, copied)
 
-    def _output(self, t_ns: int, warm: bool, vel: bool) -> bool:
+    def _predict(self, dt: float) -> None:
+        """t3 = F(dt) x, numpy's way (kalman_step.py does it with the innovations)."""
+        f = self._F
+        f[0, 1] = f[1, 2] = dt
+        f[0, 2] = 0.5 * dt * dt
+        np.dot(f, self._X, out=self._T3)
+
+    def _output(self, t_ns: int, warm: bool, vel: bool, copied: bool = False) -> bool:
+        """copied: the compiled correction has copied the state into the outputs."""
         if self.delay_s > 0.0:
             return self._output_delayed(t_ns, warm, vel)
-        np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
+        if not copied:
+            np.copyto(self._out, self._X)  # outputs are copies: predict() may overwrite them
         if self._pfir is not None and not vel and self._pfir.K:
             self._practice_filter_output(self._pf_q)
         self.stamp_ns = t_ns
