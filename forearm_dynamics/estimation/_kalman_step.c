@@ -34,6 +34,19 @@ static int get_vector(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *
     return 0;
 }
 
+/* A call on a bound Step with its number of arguments; else the exception, and 0. */
+static int callable(Step *self, Py_ssize_t nargs, Py_ssize_t expected, const char *usage) {
+    if (self->held != 8) {
+        PyErr_SetString(PyExc_RuntimeError, "Step is not bound to its arrays");
+        return 0;
+    }
+    if (nargs != expected) {
+        PyErr_SetString(PyExc_TypeError, usage);
+        return 0;
+    }
+    return 1;
+}
+
 static void Step_dealloc(Step *self) {
     for (int i = 0; i < self->held; i++)
         PyBuffer_Release(&self->bufs[i]);
@@ -73,14 +86,8 @@ static int Step_init(Step *self, PyObject *args, PyObject *kwds) {
 }
 
 static PyObject *Step_predict_innovate(Step *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (self->held != 8) {
-        PyErr_SetString(PyExc_RuntimeError, "Step is not bound to its arrays");
+    if (!callable(self, nargs, 3, "predict_innovate(q, qd_or_None, dt)"))
         return NULL;
-    }
-    if (nargs != 3) {
-        PyErr_SetString(PyExc_TypeError, "predict_innovate(q, qd_or_None, dt)");
-        return NULL;
-    }
     double dt = PyFloat_AsDouble(args[2]);
     if (dt == -1.0 && PyErr_Occurred())
         return NULL;
@@ -117,14 +124,8 @@ static PyObject *Step_predict_innovate(Step *self, PyObject *const *args, Py_ssi
 }
 
 static PyObject *Step_correct(Step *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (self->held != 8) {
-        PyErr_SetString(PyExc_RuntimeError, "Step is not bound to its arrays");
+    if (!callable(self, nargs, 4, "correct(vel, q_or_None, qd_or_None, copy_out)"))
         return NULL;
-    }
-    if (nargs != 4) {
-        PyErr_SetString(PyExc_TypeError, "correct(vel, q_or_None, qd_or_None, copy_out)");
-        return NULL;
-    }
     const int vel = PyObject_IsTrue(args[0]), copy_out = PyObject_IsTrue(args[3]);
     if (vel < 0 || copy_out < 0)
         return NULL;

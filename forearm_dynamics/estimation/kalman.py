@@ -226,11 +226,14 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
         self._pend_q = np.zeros(n)
         self._pend_qd = np.zeros(n)
         self._pend_vel = False
-        # predict, innovations, correction and the copies after it as two compiled calls on
-        # these arrays (kalman_step.py; None: numpy's way)
+        self._bind_step()
+        self.reset()
+
+    def _bind_step(self) -> None:
+        """Predict, innovations, correction and the copies after it as two compiled calls on
+        this filter's arrays (kalman_step.py; None: numpy's way)."""
         self._fast = kalman_step.bind(self._X, self._T3, self._E, self._Kp, self._Kv, self._out,
                                       self._pend_q, self._pend_qd)
-        self.reset()
 
     def __getstate__(self) -> dict:
         """Copies and pickles without the compiled step (bound to this filter's arrays)."""
@@ -241,8 +244,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self.q, self.qd, self.qdd = self._out  # views again (a copy made them arrays of their own)
-        self._fast = kalman_step.bind(self._X, self._T3, self._E, self._Kp, self._Kv, self._out,
-                                      self._pend_q, self._pend_qd)
+        self._bind_step()
 
     # -- public state ---------------------------------------------------------------------
     @property
