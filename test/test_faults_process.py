@@ -261,6 +261,11 @@ def test_publisher_killed_and_restarted(procs, tmp_path) -> None:
                     and ((early_ns >= t0[i]) & (early_ns < t0[i + 1])).any()]
     assert len(partial) - len(by_discovery) <= 2, (partial, by_discovery)
     for m in rep["movements"]:  # a cut movement too: NRMSE scaled by the whole movement
+        if m["pipeline_worst"]["nrmse"] is None:  # no torque in it to score (JSON null)
+            # only a late match leaves a whole movement unanswered (CI beside a second
+            # `make test`, load 15: the report's first movement had none)
+            assert m in by_discovery, (m, by_discovery)
+            continue
         assert m["pipeline_worst"]["nrmse"] <= 0.02 and m["state_error_rad"] <= 1e-6, m
     print(f"publisher SIGKILL + restart: {len(states['stamp'])} joint_states, "
           f"{len(torques['stamp'])} joint_torques recorded, {len(lost)} unanswered, "
