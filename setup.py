@@ -36,11 +36,16 @@ KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
                         [f"{PACKAGE}/estimation/_kalman_step.c"],
                         extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
+# The muscle node's arithmetic around the QP in C (muscles/muscle_step.py says why); optional
+# in the same way.
+MUSCLE_STEP = Extension(f"{PACKAGE}.muscles._muscle_step", [f"{PACKAGE}/muscles/_muscle_step.c"],
+                        extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
+
 setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "benchmarks", "benchmarks.*"]),
-    ext_modules=[KALMAN_STEP],
+    ext_modules=[KALMAN_STEP, MUSCLE_STEP],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -5,7 +5,8 @@
 A real MuscleNode (rclpy; its publishers have no reader) and the torque node's CDR bytes for
 the library's movements (every `--movements-step`-th). Per sample, the callback's steps are
 run one by one with the node's own objects, in the callback's order, each timed (p50 µs):
-shape check, copy + take + stamp, finiteness, geometry, QP (set-up, solve, result), writing
+shape check, copy + take + stamp, finiteness, the output templates, geometry + QP (set-up, solve,
+result: StaticOptimizer.solve_sample_into, one call in the node), writing
 both outputs, the two publish() calls, the bookkeeping after the clock. The steps are the
 calls `_on_torques` makes (forearm_dynamics/nodes/muscle_node.py); a change there must be
 mirrored here.
@@ -106,13 +107,12 @@ def sections(node, datas, rate: float = 0.0) -> dict:
         ok = math.isfinite(node._state_flat.dot(node._ones))
         t3 = _P()
         b = node.bundle
-        R, L, V = b.model.geometry(node.q, node.qd, node._geo)
-        t4 = _P()
         out, res = node._outputs.get(plan.layout.frame_id)
-        _flag, _infeasible, solve_s = b.optimizer.solve_into(R, L, V, node.tau, out.q,
-                                                             out.effort, res.effort)
+        t4 = _P()
+        _flag, _infeasible, solve_s = b.optimizer.solve_sample_into(
+            node.q, node.qd, node.tau, b.geometry, out.q, out.effort, res.effort)
         t5 = _P()
-        np.copyto(out.qd, V)
+        np.copyto(out.qd, b.geometry[2])
         out.pack_stamp(sec, nsec)
         payload = out.payload()
         reserves = res.stamped(sec, nsec)
@@ -129,8 +129,8 @@ def sections(node, datas, rate: float = 0.0) -> dict:
         if not ok or big < 0:
             raise RuntimeError("non-finite torques in the library's movements")
         for key, a, z in (("shape_check", t0, t1), ("copy_take_stamp", t1, t2),
-                          ("finiteness", t2, t3), ("geometry", t3, t4),
-                          ("qp_setup_solve_result", t4, t5), ("write_outputs", t5, t6),
+                          ("finiteness", t2, t3), ("output_templates", t3, t4),
+                          ("geometry_qp", t4, t5), ("write_outputs", t5, t6),
                           ("publish_both_no_reader", t6, t7), ("bookkeeping", t7, t8),
                           ("total", t0, t8)):
             add(key, z - a)

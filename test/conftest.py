@@ -99,3 +99,20 @@ def paper_results() -> dict:
 
     path = Path(__file__).resolve().parents[1] / "results" / "paper" / "results.json"
     return json.loads(path.read_text(encoding="utf-8"))
+
+
+@pytest.fixture(scope="module")
+def mm():
+    """The shipped muscle model (the muscle tests' subject; module-scoped: its surrogate keeps
+    per-sample scratch)."""
+    from forearm_dynamics.muscles import load_muscle_model
+
+    return load_muscle_model()
+
+
+@pytest.fixture(scope="module")
+def arm():
+    """The segmented arm (a test module may define its own `arm`: the model it needs)."""
+    from forearm_dynamics import build_model
+
+    return build_model("segmented")

@@ -17,15 +17,10 @@ import pytest
 from scipy.optimize import lsq_linear
 
 from forearm_dynamics import build_model, movement_library
-from forearm_dynamics.muscles import StaticOptimizer, load_muscle_model
+from forearm_dynamics.muscles import StaticOptimizer
 from forearm_dynamics.muscles.curves import unit_forces
 
 pytestmark = pytest.mark.unit
-
-
-@pytest.fixture(scope="module")
-def mm():
-    return load_muscle_model()
 
 
 def test_in_place_outputs_equal_the_scatter_and_the_allocating_paths(mm):

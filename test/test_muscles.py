@@ -44,16 +44,6 @@ REQUIRED = ("PT", "PQ", "SUP", "BIClong", "BICshort", "BRA", "BRD", "TRIlong", "
 J = {n: i for i, n in enumerate(JOINT_NAMES)}
 
 
-@pytest.fixture(scope="module")
-def mm():
-    return load_muscle_model()
-
-
-@pytest.fixture(scope="module")
-def arm():
-    return build_model("segmented")
-
-
 def idx(mm, names):
     return [mm.names.index(n) for n in names]
 

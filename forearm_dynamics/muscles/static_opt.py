@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import daqp
 import numpy as np
 
+from . import muscle_step
 from .curves import UnitForces
 from .model import MuscleModel, MuscleModelError, _posture
 from .surrogate import clip_ufunc
@@ -104,6 +105,7 @@ class StaticOptimizer:
         self._res = np.empty(nj)  # the residual's scratch
         self._muscles = np.empty(nj)  # solve_into's R·F(a), aligned for BLAS as A @ a makes it
         self._saturated = 1.0 - self.saturation_tol
+        self._step = None  # (geometry outputs, compiled step or None): solve_sample_into's
 
     def reset(self) -> None:
         """Forget the warm start (a new recording, a changed model)."""
@@ -182,6 +184,11 @@ class StaticOptimizer:
         r; solve_geometry reports it). Returns (exitflag, infeasible, QP time s)."""
         unit, pas = self._problem(R, L, V, tau)
         x, flag, _, dt = self._run()
+        return self._write(x, flag, dt, unit, pas, activations, forces, reserves)
+
+    def _write(self, x, flag, dt, unit, pas, activations, forces,
+               reserves) -> tuple[int, bool, float]:
+        """solve_into's second half: daqp's answer x into the caller's arrays."""
         if flag < 1:
             activations.fill(np.nan)
             forces.fill(np.nan)
@@ -197,6 +204,41 @@ class StaticOptimizer:
             forces += pas
         np.copyto(activations, x)
         return flag, bool(x.max() >= self._saturated), dt
+
+    def solve_sample_into(self, q, qd, tau, geo, activations, forces,
+                          reserves) -> tuple[int, bool, float]:
+        """model.geometry(q, qd, geo) then solve_into: a node's whole per-sample path (geo =
+        model.geometry_outputs(), R, L and V written there as geometry writes them). Where the
+        compiled step is built (muscle_step.py) the arithmetic before and after daqp's solve
+        is one call each; else numpy's way. The same numbers to rounding; returns solve_into's
+        (exitflag, infeasible, QP time s)."""
+        step = self._step[1] if self._step is not None and self._step[0] is geo else self._bind(geo)
+        if step is not None:
+            try:
+                step.problem(q, qd, tau)  # checks its arguments before it writes anything
+            except (ValueError, BufferError):  # not contiguous float64 (20,) each
+                step = None
+        if step is None:  # numpy's way
+            R, L, V = self.model.geometry(q, qd, geo)
+            return self.solve_into(R, L, V, tau, activations, forces, reserves)
+        x, flag, _, dt = self._run()
+        if flag >= 1:
+            try:
+                return flag, step.finish(x, activations, forces, reserves) >= self._saturated, dt
+            except (ValueError, BufferError):  # outputs it cannot take: numpy's way
+                pass
+        return self._write(x, flag, dt, self._unit._unit, self._unit._zeros, activations,
+                           forces, reserves)
+
+    def _bind(self, geo):
+        """The compiled step on geo's arrays (kept for the next sample), or None."""
+        buf = self.model.surrogate.output_buffer(geo[0], geo[1])
+        step = None
+        if buf is not None and geo[2].flags.c_contiguous:
+            step = muscle_step.bind(self.model.surrogate, self._unit, buf, geo[2], self._A,
+                                    self._rhs_u, self._rhs_l)
+        self._step = (geo, step)
+        return step
 
     def solve_many(self, q, qd, tau) -> MuscleSeries:
         """A recording (N, 20) each, in time order (each sample warm-starts the next)."""

@@ -255,6 +255,30 @@ class Surrogate:
             multiply(p, q, out=out)
         return self._mono
 
+    def plan_tables(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """evaluate()'s plan as flat tables, for the compiled step (muscle_step.py): the
+        degree-1 monomials' variables (indices into [1, x]; they are monomials 1..k), then
+        every product as (monomial, first parent, second parent), in evaluation order (each
+        parent is of lower degree, so one pass in this order is the steps' result)."""
+        first = np.zeros(0, int)
+        outs, pas, pbs = [], [], []
+        for sl, pa, pb in self.levels:
+            if pb is None:
+                if sl.start != 1:
+                    raise ValueError("the degree-1 monomials must follow the constant")
+                first = self.variables[sl]
+                continue
+            outs.append(np.arange(sl.start, sl.stop))
+            pas.append(pa)
+            pbs.append(pb)
+        flat = [np.concatenate(t) if t else np.zeros(0, int) for t in (outs, pas, pbs)]
+        return first, (flat[0], flat[1], flat[2])
+
+    def output_buffer(self, R: np.ndarray, L: np.ndarray) -> np.ndarray | None:
+        """The one buffer a new_outputs() pair (R, L) views, or None for other arrays."""
+        direct = self._direct.get(id(R))
+        return direct[2] if direct is not None and direct[0] is R and direct[1] is L else None
+
     def new_outputs(self) -> tuple[np.ndarray, np.ndarray]:
         """(R (n, 20), L (n,)) for evaluate(q, out=...): R's unspanned entries stay 0. Both
         are views of one buffer the sparse product writes in place (the last 8 pairs made

@@ -139,7 +139,6 @@ class MuscleNode(MuscleStatus, Node):
         self._state_flat, self._ones = self._state.reshape(-1), np.ones(self._state.size)
         self._outputs = OutputTemplates(self.bundle.model.names, JOINT_NAMES)
         self._stamp = STAMP.unpack_from
-        self._geo = self.bundle.model.geometry_outputs()  # R, L, V: written per sample
 
         qos = stream_qos(s.qos_depth, s.qos_reliable)
         self.pub = self.create_publisher(JointState, s.output_topic, qos)
@@ -239,16 +238,14 @@ class MuscleNode(MuscleStatus, Node):
             self._next = None
             self._outputs.rename(nxt.model.names)
             self.bundle = nxt
-            self._geo = nxt.model.geometry_outputs()
             self.applies_from = sec * 1_000_000_000 + nsec
             self._worker.announce(nxt, self.applies_from)
         b = self.bundle
-        R, L, V = b.model.geometry(self.q, self.qd, self._geo)
         out, res = self._outputs.get(frame_id)
         # activations, forces and reserves written straight into the two messages' bytes
-        flag, infeasible, solve_s = b.optimizer.solve_into(R, L, V, self.tau, out.q,
-                                                           out.effort, res.effort)
-        np.copyto(out.qd, V)
+        flag, infeasible, solve_s = b.optimizer.solve_sample_into(
+            self.q, self.qd, self.tau, b.geometry, out.q, out.effort, res.effort)
+        np.copyto(out.qd, b.geometry[2])  # the path velocities
         out.pack_stamp(sec, nsec)
         t_pub = _perf_ns()
         self.pub.publish(out.payload())

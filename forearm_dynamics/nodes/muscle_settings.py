@@ -108,6 +108,7 @@ class MuscleBundle:
     config_id: int
     model: MuscleModel
     optimizer: StaticOptimizer
+    geometry: tuple  # model.geometry_outputs(): R, L, V written per sample (solve_sample_into)
     source: str  # "own parameters" or the torque node's config topic
     arm_summary: dict  # model kind, body size, side, payload of the arm it is for
     build_ms: float
@@ -120,11 +121,13 @@ def build_bundle(settings: MuscleSettings, config_id: int, body_size: Any, side:
     mm = load_muscle_model(settings.muscle_model or None, side=side, body_size=body_size)
     so = StaticOptimizer(mm, reserve_optimal_torque=settings.reserve_optimal_torque,
                          passive=settings.passive, velocity=settings.force_velocity)
-    # first-call costs (numpy paths, the QP's set-up) here, not on the first sample it solves
-    nj = len(mm.joint_names)
-    so.solve(np.zeros(nj), np.zeros(nj), np.zeros(nj))
+    # first-call costs (numpy paths, the QP's set-up, binding the compiled step to the
+    # geometry's arrays) here, not on the first sample it solves
+    nj, geo = len(mm.joint_names), mm.geometry_outputs()
+    zero = np.zeros(nj)
+    so.solve_sample_into(zero, zero, zero, geo, np.empty(mm.n), np.empty(mm.n), np.empty(nj))
     so.reset()
-    return MuscleBundle(config_id, mm, so, source, arm_summary,
+    return MuscleBundle(config_id, mm, so, geo, source, arm_summary,
                         (time.perf_counter() - t0) * 1e3)
 
 

@@ -62,12 +62,11 @@ def compute(stream: JointSeries, mm: MuscleModel, *, reserve_optimal_torque: flo
     n, N = mm.n, len(solved)
     a, f, sp = np.empty((N, n)), np.empty((N, n)), np.empty((N, n))
     r, inf, st = np.empty((N, len(JOINT_NAMES))), np.zeros(N, bool), np.empty(N)
-    for k, i in enumerate(solved):
+    geo = mm.geometry_outputs()
+    for k, i in enumerate(solved):  # the node's own per-sample path (solve_sample_into)
         q, qd, tau = stream.position[i], stream.velocity[i], stream.effort[i]
-        R, L, V = mm.geometry(q, qd)
-        s = so.solve_geometry(R, L, V, tau)
-        a[k], f[k], sp[k], r[k], inf[k], st[k] = s.activations, s.forces, V, s.reserves, \
-            s.infeasible, s.solve_time
+        _flag, inf[k], st[k] = so.solve_sample_into(q, qd, tau, geo, a[k], f[k], r[k])
+        sp[k] = geo[2]
     return MuscleResult(stream.stamp_ns[solved], stream.log_ns[solved],
                         [stream.frame_ids[i] for i in solved], a, sp, f, r, inf, st,
                         int((~ok).sum()), len(idx) - N, warnings)
