@@ -48,9 +48,11 @@ means are not the movement at their mean times, and the movement leaked in as no
 and a real 0.63 rad step went uncorrected for a second (stop 39, a two-host run at load 9;
 test_noise_bursty_loss.py replays that input). So a jittered window is skipped (counted in
 `irregular_windows`) when it spans more than WINDOW_STRETCH x its nominal time or its blocks'
-stamp variances differ more than BLOCK_SPREAD_RATIO. Uniform stamps never are (that branch
-does not look); of 20 000 samples, none of a loaded publisher's stalls (test_estimation_parts'
-stalled_grid) nor of ±0.3 ms jitter with 5 % random loss; 39 of 625 of that run's input.
+stamp variances differ more than BLOCK_SPREAD_RATIO. Uniform stamps never are: past a
+window of equal steps they take the other branch, and the windows just after a restart (still
+here) have one span and equal variances; of 20 000 samples, none of a loaded publisher's
+stalls (test_estimation_parts' stalled_grid) nor of ±0.3 ms jitter with 5 % random loss; 39
+of 625 of that run's input.
 
 Velocities (when the message has them): v0 - v1 - rho (v1 - v2), rho = dt0 / dt1, zero for
 any constant acceleration at any stamp spacing, variance (1 + (1 + rho)^2 + rho^2) r_v^2 for
