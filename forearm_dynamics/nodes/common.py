@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import gc
 import signal
@@ -243,15 +244,19 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
             node = make_node()
         except ParameterError as exc:
             rclpy.logging.get_logger(name).error(str(exc))
+            destroy_half_made(exc)
             return USAGE
-        except (KeyboardInterrupt, ExternalShutdownException):
+        except (KeyboardInterrupt, ExternalShutdownException) as exc:
+            destroy_half_made(exc)
             return OK  # stopped during start-up (the node left its files complete)
         except Exception as exc:
             if not rclpy.ok():  # SIGINT/SIGTERM during start-up: rcl calls fail, a normal stop
+                destroy_half_made(exc)
                 return OK
             if not isinstance(exc, (RuntimeError, NameValidationException)):
                 raise
             rclpy.logging.get_logger(name).error(f"cannot start: {exc}")  # e.g. a remap clash
+            destroy_half_made(exc)
             return USAGE
         executor = make_executor(getattr(node, "executor_kind", "events"))
         # One BLAS thread: a node's linear algebra is 3x3 to 20x20, where OpenBLAS threads
@@ -286,6 +291,29 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+def destroy_half_made(exc: BaseException) -> None:
+    """Destroy, in rclpy's order, the node whose constructor raised `exc` (found as `self` in
+    its traceback's frames), before the exception is dropped.
+
+    A constructor that refuses a parameter raises after rclpy's Node.__init__ made the rcl
+    node, its parameter services and its /rosout publisher. Nothing else refers to that
+    half-made node: when run() drops the exception, Python frees it and its entities in
+    whatever order its references go, the rmw participant included, with discovery of the
+    nodes that started beside it still under way. In CI one of 150 refused starts (eight at
+    a time in one domain) hung there for 180 s after its error line (the stack at the end of
+    run()'s except clause). destroy_node() is the order every normal stop uses (entities,
+    then the node), and what rclpy asks for (ros2/rclpy#456: destroy a node's objects before
+    the node, explicitly, not by garbage collection)."""
+    tb = exc.__traceback__
+    while tb is not None:
+        node = tb.tb_frame.f_locals.get("self")
+        if isinstance(node, Node):
+            with contextlib.suppress(AttributeError, RuntimeError):  # Node.__init__ failed:
+                node.destroy_node()  # its parts missing (AttributeError) or not made (rcl's)
+            return
+        tb = tb.tb_next
 
 
 def _finish(node: Node) -> int:
