@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import shutil
 import signal
 import subprocess
@@ -21,24 +20,12 @@ import pytest
 import rosproc
 from faultkit import TorqueHarness, joint_state
 from std_msgs.msg import String
+from support.scheduling import needs_fifo
 
 from forearm_dynamics import realtime
 from forearm_dynamics.nodes.common import latched_qos
 
 pytestmark = pytest.mark.ros
-
-
-def _may_set_fifo() -> bool:
-    """CAP_SYS_NICE (root here, CI) or an RLIMIT_RTPRIO of at least 50."""
-    soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
-    if soft == resource.RLIM_INFINITY or soft >= 50:
-        return True
-    status = Path("/proc/self/status").read_text().splitlines()
-    caps = next(line for line in status if line.startswith("CapEff"))
-    return bool(int(caps.split()[1], 16) & (1 << 23))  # CAP_SYS_NICE
-
-
-needs_fifo = pytest.mark.skipif(not _may_set_fifo(), reason="needs CAP_SYS_NICE or rtprio >= 50")
 
 
 def _threads(pid: int) -> list[realtime.ThreadSched]:
