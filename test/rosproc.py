@@ -178,7 +178,8 @@ class Peer:
         from rclpy.experimental import EventsExecutor
 
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain if domain is not None else domain_id())
+        self.domain = domain if domain is not None else domain_id()
+        rclpy.init(context=self.context, domain_id=self.domain)
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -196,6 +197,21 @@ class Peer:
                 return False
             self.executor.spin_once(timeout_sec=0.02)
         return True
+
+    def endpoints(self, topic: str) -> str:
+        """Who publishes and subscribes `topic` as this peer sees the graph, and whether its
+        domain is this process's alone: said when a test finds an endpoint it did not make."""
+        node = self.node
+        held = [x for x in _test_leases + [_session_lease] if x is not None and x.domain == self.domain]
+        lease = ("leased here" if any(x.exclusive for x in held) else
+                 "shared: every id of its range was held" if held else "not leased here")
+        def names(infos) -> str:
+            return ", ".join(f"{i.node_namespace.rstrip('/')}/{i.node_name} ("
+                             f"{i.qos_profile.reliability.name.lower()})" for i in infos) or "none"
+        return (f"domain {self.domain} ({lease}); {topic} publishers: "
+                f"{names(node.get_publishers_info_by_topic(topic))}; subscribers: "
+                f"{names(node.get_subscriptions_info_by_topic(topic))}; nodes: "
+                f"{sorted(f'{ns.rstrip(chr(47))}/{n}' for n, ns in node.get_node_names_and_namespaces())}")
 
     def close(self) -> None:
         self.executor.remove_node(self.node)

@@ -47,7 +47,8 @@ def test_live_stream_of_degrees_is_refused_naming_units(procs):
         # and the node has matched this peer on both topics (it logs each side): nothing
         # else is said once the stream starts
         for line in ("/joint_torques: matched by 1", "/joint_states: receiving from 1"):
-            assert proc.wait_for_output(line, rosproc.STARTUP_S), proc.output()
+            assert proc.wait_for_output(line, rosproc.STARTUP_S), \
+                f"{proc.output()}\n{peer.endpoints('/joint_torques')}\n{peer.endpoints('/joint_states')}"
         mark = len(proc.output())
         mv = movement_library()[0]
         t = mv.sample_times(1000.0)[:300]
