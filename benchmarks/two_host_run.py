@@ -235,8 +235,8 @@ def _wait_streaming(pub: subprocess.Popen, log: Path, timeout: float = 120.0) ->
 
 
 def run_case(case: Case, movements: int, domain: int, work: Path, *, node_args: tuple[str, ...] = (),
-             profile: Path = LOSSY_PROFILE, stall_ms: float = 0.0, node_cpu: float | None = None,
-             start_delay: float = 8.0) -> dict:
+             recorder_args: tuple[str, ...] = (), profile: Path = LOSSY_PROFILE,
+             stall_ms: float = 0.0, node_cpu: float | None = None, start_delay: float = 8.0) -> dict:
     """Run one case; every figure of it (see the module docstring), check_bag's verdict on
     B's bag (a best-effort case allows loss: it is counted) and its JSON report.
 
@@ -258,8 +258,8 @@ def run_case(case: Case, movements: int, domain: int, work: Path, *, node_args: 
                          logs / "a_node.log")
         share.add(node.pid)  # `ip netns exec` execs the node: the same pid
         udp0 = {"a": udp_counters(h.a), "b": udp_counters(h.b)}
-        rec = h.b.start([str(BIN / "bag_recorder"), "--ros-args", "-p", f"output:={bag}"], env,
-                        logs / "b_rec.log")
+        rec = h.b.start([str(BIN / "bag_recorder"), "--ros-args", "-p", f"output:={bag}",
+                         *recorder_args], env, logs / "b_rec.log")
         pub = h.b.start([str(BIN / "trajectory_publisher"), "--ros-args", "-p",
                          f"movements:={list(range(1, movements + 1))}", "-p",
                          f"start_delay:={start_delay}", "-p", "min_subscribers:=2", "-p",
@@ -301,6 +301,7 @@ def run_case(case: Case, movements: int, domain: int, work: Path, *, node_args: 
     received, processed = _summary(node_log)
     return {"case": case.name, **{k: v for k, v in asdict(case).items() if k != "name"},
             "profile_file": str(profile) if case.profile else None, "node_args": list(node_args),
+            "recorder_args": list(recorder_args),
             "stall_ms": stall_ms, "stalls": stalls.count if stalls else 0, "node_cpu_limit": node_cpu,
             "loadavg_start": load0, "loadavg_end": loadavg(), "exits": exits, "sent": sent,
             "node_received": received, "node_processed": processed,
@@ -311,4 +312,13 @@ def run_case(case: Case, movements: int, domain: int, work: Path, *, node_args: 
             "drained": drained, "check_bag_exit": check.returncode,
             "check_bag_tail": (check.stdout + check.stderr)[-600:],
             "check": json.loads(report.read_text()) if report.exists() else None,
-            "node_log_tail": node_log[-1500:]}
+            "node_log_tail": node_log[-1500:],
+            "scheduling": {k: _scheduling_line(logs / f) for k, f in (("node", "a_node.log"),
+                                                                      ("recorder", "b_rec.log"))}}
+
+
+def _scheduling_line(log: Path) -> str | None:
+    """What a node's realtime_priority got, in its own words ("scheduling: fifo 50 (...)";
+    read back from /proc by realtime.apply), or None where it asked for nothing."""
+    text = log.read_text(errors="replace") if log.exists() else ""
+    return next((ln.split("]: ", 1)[-1] for ln in text.splitlines() if "]: scheduling: " in ln), None)
