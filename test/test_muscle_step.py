@@ -131,17 +131,10 @@ def test_the_kernel_refuses_what_it_cannot_take_and_writes_nothing(mm) -> None:
             muscle_step.bind(**args)
     finally:
         s._full = full
-    first, steps = s.plan_tables()
-    i64 = muscle_step._i64
     length = np.diff(full[2])
-    rows = np.argsort(length, kind="stable")[-np.count_nonzero(length):]  # shortest first
-    u = so._unit
+    shortest_first = np.argsort(length, kind="stable")[-np.count_nonzero(length):]
     with pytest.raises(ValueError, match="^rows:"):
-        muscle_step.Step(s.center, s.inv_half, i64(first), *(i64(t) for t in steps),
-                         i64(full[2]), full[3].astype(np.int32), full[4], i64(rows), u.lts,
-                         u.inv_l0, np.broadcast_to(u.v_scale, u.lts.shape).copy(), u.f0_d1,
-                         u.f0_d4, u.f0, s._xe, s._mono, args["geo_buffer"], geo[2], u._unit,
-                         so._A, so._rhs_u, so._rhs_l, True)
+        muscle_step.bind(**args, rows=shortest_first)
 
 
 def test_what_it_does_not_cover_runs_numpys_way(mm, arm) -> None:

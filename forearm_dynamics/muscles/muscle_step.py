@@ -32,20 +32,22 @@ def _i64(a) -> np.ndarray:
 
 
 def bind(surrogate, unit, geo_buffer: np.ndarray, V: np.ndarray, A: np.ndarray,
-         rhs_u: np.ndarray, rhs_l: np.ndarray):
+         rhs_u: np.ndarray, rhs_l: np.ndarray, rows: np.ndarray | None = None):
     """A Step on these arrays, or None (no extension, or curves it does not compute).
 
     surrogate: the model's Surrogate (its tables and scratch); unit: the optimizer's
     UnitForces (its constants); geo_buffer: the one buffer a geometry_outputs() pair (R, L)
     views ([L (n); R (n, 20) flat]); V (n,), A (20, n), rhs_u, rhs_l (20,): written each
-    sample, as numpy's path writes them."""
+    sample, as numpy's path writes them. rows: the order the sparse product takes the
+    non-empty rows in, longest first (the default; the kernel refuses any other order)."""
     if Step is None or unit.pennate or unit.passive:
         return None
     s = surrogate
     first, steps = s.plan_tables()
     _, _, indptr, indices, data = s._full
-    length = np.diff(indptr)
-    rows = np.argsort(-length, kind="stable")[: np.count_nonzero(length)]  # longest first
+    if rows is None:
+        length = np.diff(indptr)
+        rows = np.argsort(-length, kind="stable")[: np.count_nonzero(length)]
     return Step(s.center, s.inv_half, _i64(first), *(_i64(t) for t in steps), _i64(indptr),
                 np.ascontiguousarray(indices, np.int32), np.ascontiguousarray(data), _i64(rows),
                 unit.lts, unit.inv_l0,
