@@ -55,8 +55,18 @@ def test_domain(lo: int, hi: int) -> int:
     module), so concurrent sessions never share it. Not sooner: a module's fixture may keep a
     node on its domain while a test takes another (test_faults_input's module harness and
     its 5 kHz test did; released at the second call, the first domain went to a concurrent
-    session whose nodes then answered in it)."""
-    lease = lease_domain(lo, hi, os.getpid() * 7 + next(_counter))
+    session whose nodes then answered in it). Never shared: lease_domain shares an id when
+    every one of the range is held (a demo can live with that, a test cannot), so this waits
+    for a free one instead (a hang guard of STARTUP_S)."""
+    deadline = time.monotonic() + STARTUP_S
+    while True:  # never a shared one: another session's nodes would answer in it
+        lease = lease_domain(lo, hi, os.getpid() * 7 + next(_counter))
+        if lease.exclusive:
+            break
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"no ROS domain of {lo}..{hi} free for {STARTUP_S:g} s: every "
+                               "one is leased by another test or run on this machine")
+        time.sleep(1.0)
     _test_leases.append(lease)
     return lease.domain
 

@@ -112,6 +112,37 @@ def test_test_domains_stay_leased_until_released() -> None:
     assert rosproc._test_leases == []
 
 
+#: another process's lease of one free id of the tests' range, held for 3 s
+HOLDER = """
+import sys, time
+from forearm_dynamics.processes import lease_domain
+lease = lease_domain(102, 139)
+print(lease.domain, lease.exclusive, flush=True)
+time.sleep(3.0)
+"""
+
+
+def test_a_test_domain_is_never_shared_it_waits_for_a_free_one() -> None:
+    """When every id of its range is held, lease_domain shares one (a demo can live with
+    that); a test's domain must not be shared (another session's nodes would answer in it):
+    test_domain waits until the holder lets go."""
+    import rosproc
+
+    holder = subprocess.Popen([sys.executable, "-c", HOLDER], stdout=subprocess.PIPE, text=True)
+    try:
+        domain, exclusive = holder.stdout.readline().split()
+        assert exclusive == "True"
+        t0 = time.monotonic()
+        got = rosproc.test_domain(int(domain), int(domain))  # its only id: held by the holder
+        waited = time.monotonic() - t0
+        assert got == int(domain) and rosproc._test_leases[-1].exclusive
+        assert holder.poll() is not None and waited > 1.0, waited  # after the holder ended
+    finally:
+        holder.kill()
+        holder.wait()
+        rosproc.release_test_domains()
+
+
 def test_start_wait_for_and_stop(tmp_path) -> None:
     a, b = sleeper(tmp_path), sleeper(tmp_path, split=True)
     try:
