@@ -113,7 +113,7 @@ def test_test_domains_stay_leased_until_released() -> None:
 
 
 #: another process's lease of one free id of the tests' range, held for 3 s
-HOLDER = """
+TEST_DOMAIN_HOLDER = """
 import sys, time
 from forearm_dynamics.processes import lease_domain
 lease = lease_domain(102, 139)
@@ -128,7 +128,8 @@ def test_a_test_domain_is_never_shared_it_waits_for_a_free_one() -> None:
     test_domain waits until the holder lets go."""
     import rosproc
 
-    holder = subprocess.Popen([sys.executable, "-c", HOLDER], stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen([sys.executable, "-c", TEST_DOMAIN_HOLDER], stdout=subprocess.PIPE,
+                              text=True)
     try:
         domain, exclusive = holder.stdout.readline().split()
         assert exclusive == "True"
