@@ -222,7 +222,8 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
     context down, which ends spin()), also during start-up; USAGE for a refused parameter
     or unusable --ros-args; otherwise what the node says. The node may set
     `executor_kind` and `done` (a Future) to steer the spin, and define `finish() -> int`
-    (called after the spin, e.g. to close a file) or an `exit_code` attribute.
+    (called after the spin, e.g. to close a file) or an `exit_code` attribute, and
+    `settle_on_stop()` (after a stop's spin, before the context goes: e.g. wait for acks).
 
     rcl failures reach Python as rclpy's RCLError, a RuntimeError: caught by that public
     base class (the class itself lives in rclpy's private extension module).
@@ -282,6 +283,9 @@ def run(make_node: Callable[[], Node], name: str, args: list[str] | None = None)
             except (KeyboardInterrupt, ExternalShutdownException):
                 pass
         if STOP.requested:  # out of the executor: the context goes (helper threads see it)
+            settle = getattr(node, "settle_on_stop", None)
+            if callable(settle):  # while the context lives, e.g. a writer's last repairs
+                settle()
             rclpy.try_shutdown()
         try:
             return _finish(node)
