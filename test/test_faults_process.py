@@ -60,8 +60,11 @@ DEPTH = ("-p", "qos_depth:=10000")
 NODE_ARGS = ("-p", "diagnostics_period:=0.5", *DEPTH, *EXACT)
 #: min_subscribers 3: torque_node, the recorder and the Watch all read joint_states (with 2
 #: the publisher streamed once the recorder and the watch matched, 1.2 s before the node did)
+#: drain 30 s: stopped, the publisher waits (at most that) until its last samples are
+#: acknowledged, also by a node a loaded machine starves at that moment (under the 60 s of
+#: NodeProcess.stop's hang guard)
 PUBLISHER_ARGS = ("-p", "movements:=[1, 28, 53]", "-p", "loop:=true", "-p", "start_delay:=0.5",
-                  "-p", "subscriber_timeout:=30.0", "-p", "min_subscribers:=3")
+                  "-p", "subscriber_timeout:=30.0", "-p", "min_subscribers:=3", "-p", "drain:=30.0")
 
 
 class Watch:
@@ -215,6 +218,9 @@ def test_publisher_killed_and_restarted(procs, tmp_path) -> None:
         watch.wait_torques(1500)
         diag = watch.diag.fresh()
         assert pub2.stop(signal.SIGINT) == 0, pub2.output()
+        # stopped, it waited for its readers' acknowledgements (settle_on_stop): the node has
+        # every sample it sent, also if a loaded machine starved it at that moment
+        assert "]: stopped: " in pub2.output() and "not all acknowledged" not in pub2.output()
         watch.drain(tmp_path / "run.mcap")
         assert rec.stop(signal.SIGINT) == 0, rec.output()
         assert node.stop(signal.SIGINT) == 0, node.output()
