@@ -215,13 +215,17 @@ class Peer:
         held = [x for x in _test_leases + [_session_lease] if x is not None and x.domain == self.domain]
         lease = ("leased here" if any(x.exclusive for x in held) else
                  "shared: every id of its range was held" if held else "not leased here")
+
+        def full(namespace: str, name: str) -> str:
+            return f"{namespace.rstrip('/')}/{name}"
+
         def names(infos) -> str:
-            return ", ".join(f"{i.node_namespace.rstrip('/')}/{i.node_name} ("
-                             f"{i.qos_profile.reliability.name.lower()})" for i in infos) or "none"
+            return ", ".join(f"{full(i.node_namespace, i.node_name)} "
+                             f"({i.qos_profile.reliability.name.lower()})" for i in infos) or "none"
         return (f"domain {self.domain} ({lease}); {topic} publishers: "
                 f"{names(node.get_publishers_info_by_topic(topic))}; subscribers: "
                 f"{names(node.get_subscriptions_info_by_topic(topic))}; nodes: "
-                f"{sorted(f'{ns.rstrip(chr(47))}/{n}' for n, ns in node.get_node_names_and_namespaces())}")
+                f"{sorted(full(ns, n) for n, ns in node.get_node_names_and_namespaces())}")
 
     def close(self) -> None:
         self.executor.remove_node(self.node)

@@ -414,6 +414,7 @@ def test_runtime_changes_are_refused_and_change_nothing(tmp_path) -> None:
 HALF_MADE = r"""
 import sys
 from rclpy.node import Node
+from std_msgs.msg import String
 from forearm_dynamics.nodes import common
 from forearm_dynamics.nodes.params import ParameterError
 
@@ -421,7 +422,7 @@ destroyed = []
 class Refusing(Node):
     def __init__(self):
         super().__init__("refusing")
-        self.create_publisher(__import__("std_msgs.msg").msg.String, "chatter", 10)
+        self.create_publisher(String, "chatter", 10)
         raise ParameterError("rate", "must be > 0, got -1")
     def destroy_node(self):
         destroyed.append(len(list(self.publishers)))  # entities still there: explicit

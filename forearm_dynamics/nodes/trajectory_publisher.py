@@ -346,12 +346,7 @@ class TrajectoryPublisher(Node):
 
     def _finish(self) -> None:
         """Stop the timer, let reliable subscribers acknowledge, then end the spin."""
-        self.timer.cancel()
-        acked = self._wait_for_acks()
-        self.get_logger().info(
-            f"done: {self.sent} samples, {self.skipped} skipped, {self.dropped} dropped"
-            + ("" if acked else f"; not all acknowledged within {self.settings.drain:g} s")
-        )
+        self._stop_and_drain("done")
         self.done.set_result(True)
 
     def settle_on_stop(self) -> None:
@@ -360,18 +355,19 @@ class TrajectoryPublisher(Node):
         reader's buffer dropped is repaired by the writer, and only while the writer lives:
         a publisher stopped right after sending lost its last samples to a node starved at
         that moment (its answer never came; test_faults_process under a second make test)."""
-        if self.done.done():  # finished (and drained) before the stop
-            return
+        if not self.done.done():  # else finished (and drained) before the stop
+            self._stop_and_drain("stopped")
+
+    def _stop_and_drain(self, verb: str) -> None:
+        """No more samples; wait up to `drain` s for reliable subscribers' acknowledgements;
+        say what was sent."""
         self.timer.cancel()
-        acked = self._wait_for_acks()
+        drain = Duration(nanoseconds=round(self.settings.drain * 1e9))
+        acked = all(p.wait_for_all_acked(drain) for p in (self.pub, self.marker_pub))
         self.get_logger().info(
-            f"stopped: {self.sent} samples, {self.skipped} skipped, {self.dropped} dropped"
+            f"{verb}: {self.sent} samples, {self.skipped} skipped, {self.dropped} dropped"
             + ("" if acked else f"; not all acknowledged within {self.settings.drain:g} s")
         )
-
-    def _wait_for_acks(self) -> bool:
-        drain = Duration(nanoseconds=round(self.settings.drain * 1e9))
-        return all(p.wait_for_all_acked(drain) for p in (self.pub, self.marker_pub))
 
 
 def main() -> None:
