@@ -36,6 +36,11 @@ KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
                         [f"{PACKAGE}/estimation/_kalman_step.c"],
                         extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
+# The noise estimator's per-sample store in C (estimation/noise_step.py says why); optional
+# in the same way.
+NOISE_STEP = Extension(f"{PACKAGE}.estimation._noise_step", [f"{PACKAGE}/estimation/_noise_step.c"],
+                       extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
+
 # The muscle node's arithmetic around the QP in C (muscles/muscle_step.py says why); optional
 # in the same way.
 MUSCLE_STEP = Extension(f"{PACKAGE}.muscles._muscle_step", [f"{PACKAGE}/muscles/_muscle_step.c"],
@@ -45,7 +50,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "benchmarks", "benchmarks.*"]),
-    ext_modules=[KALMAN_STEP, MUSCLE_STEP],
+    ext_modules=[KALMAN_STEP, NOISE_STEP, MUSCLE_STEP],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

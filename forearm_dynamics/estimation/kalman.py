@@ -104,6 +104,7 @@ import numpy as np
 from . import ca_model, kalman_step, practice_lag
 from .base import SettingSpec, StateEstimator
 from .ca_model import process_noise, steady_state, transition  # noqa: F401 - public API
+from .compiled import BindsCompiled
 from .delayed_output import DelayedOutput
 from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public API
 from .gate import JumpGate
@@ -119,7 +120,8 @@ NOISE_EVERY_S = 0.25
 MAX_DELAY_S = 0.2
 
 
-class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEstimator):
+class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCompiled,
+               StateEstimator):
     """White-jerk Kalman filter, per-joint noise; see the module docstring."""
 
     name = "kalman"
@@ -226,25 +228,18 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, StateEst
         self._pend_q = np.zeros(n)
         self._pend_qd = np.zeros(n)
         self._pend_vel = False
-        self._bind_step()
+        self._bind()
         self.reset()
 
-    def _bind_step(self) -> None:
+    def _bind(self) -> None:
         """Predict, innovations, correction and the copies after it as two compiled calls on
         this filter's arrays (kalman_step.py; None: numpy's way)."""
         self._fast = kalman_step.bind(self._X, self._T3, self._E, self._Kp, self._Kv, self._out,
                                       self._pend_q, self._pend_qd)
 
-    def __getstate__(self) -> dict:
-        """Copies and pickles without the compiled step (bound to this filter's arrays)."""
-        state = self.__dict__.copy()
-        state["_fast"] = None
-        return state
-
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
+        super().__setstate__(state)  # BindsCompiled: its own compiled step
         self.q, self.qd, self.qdd = self._out  # views again (a copy made them arrays of their own)
-        self._bind_step()
 
     # -- public state ---------------------------------------------------------------------
     @property

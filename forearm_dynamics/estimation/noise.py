@@ -65,21 +65,25 @@ import math
 
 import numpy as np
 
+from .noise_store import (  # noqa: F401 - the rate's constants are noise's public ones
+    DENSE_PERIOD_S,
+    DENSE_STRIDE,
+    GAP_MIN_S,
+    GAP_PERIODS,
+    NOMINAL_TOL,
+    POSITION_DUE,
+    VELOCITY_DUE,
+    WHITE_DUE,
+    Ctr,
+    SampleRings,
+)
+
 SPACING_S = 0.05
 ORDER = 5
 EVERY_S = 0.02
 TAU_S = 2.0
 CLIP_SIGMAS = 4.0
 CLIP_RUN = 3  # evaluations clipped in a row: the noise rose, stop clipping that joint
-GAP_PERIODS = 3.0
-RATE_ALPHA = 0.005  # weight of one step in the mean period that tells a new rate from jitter
-#: the nominal period (period_s) follows the mean once they differ by more than this; the
-#: stride stays (a new stride only past 25 %). The first step sets both, and a stream stamped
-#: by a publisher's clock can start 17 % off its rate (a node benchmark's 1.168 ms at 1 kHz):
-#: the filter's groups, seated at the nominal period, then ran their covariance recursion
-#: on every sample (2 of them: 34-57 µs of the update in the node)
-NOMINAL_TOL = 0.02
-GAP_MIN_S = 0.04  # a step shorter than this is never a gap: a late publisher, not a lost sensor
 MIN_EVALUATIONS = 5  # before this many, the estimate is not ready
 #: A jittered window is skipped (module docstring, "samples lost in bursts") when it spans
 #: more than WINDOW_STRETCH x its nominal time (a quarter of its samples lost), or when its
@@ -101,140 +105,68 @@ def divided_difference_weights(t: list[float]) -> tuple[list[float], float]:
     return w, sum(x * x for x in w)
 
 
-class NoiseEstimator:
+class NoiseEstimator(SampleRings):
     """Per-joint position (and velocity) noise std, updated sample by sample.
 
     `add(t_s, q, qd)` takes a sample (t in s); `position()` / `velocity()` are (n,) arrays
     of the current estimates (rad, rad/s), `ready` / `velocity_ready` whether they have
     enough evaluations; `restart()` after a gap or a re-initialised filter.
+
+    A sample is stored (the rings, the rate, the counters: noise_store.SampleRings) by one
+    compiled call where noise_step.py's extension is built; the evaluations it makes due
+    run here.
     """
 
     def __init__(self, n: int):
-        self.n = n
+        super().__init__(n, SPACING_S, EVERY_S, ORDER + 1)
         self.ms = np.zeros(n)  # mean square, position
         self.ms_v = np.zeros(n)
         self.evaluations = 0
         self.irregular_windows = 0  # evaluations skipped: blocks not comparable (bursty loss)
         self.white_evaluations = 0
         self.ms_w = np.zeros(n)  # mean square of the third difference / 20: the white level
-        self._wring = np.zeros((4, n))
-        self._wt = [0.0] * 4  # their times (s)
-        self._wcount = 0
         self._d3 = [np.roll([-1.0, 3.0, -3.0, 1.0], h + 1) for h in range(4)]  # newest at h
         self._nclip = np.zeros(n, np.int64)
         self._nclip_v = np.zeros(n, np.int64)
         self._over = np.zeros(n, bool)
         self.velocity_evaluations = 0
-        self._cap = 0
-        self._stride = 0
-        self._every = 1
-        self._dt = 0.0
-        self._raw = np.zeros((0, n))  # the last (ORDER + 1) x stride samples, a ring (twice)
-        self._rawt = np.zeros(0)  # their times (s)
         self._sums = np.zeros((ORDER + 1, n))  # the blocks' sums, oldest first
         self._z = np.zeros(n)
         self._tmp = np.zeros(n)
         self._w = np.zeros(ORDER + 1)
-        self._vring = np.zeros((3, n))
-        self._vt = [0.0, 0.0, 0.0]
-        self._count = 0
-        self._vcount = 0
-        self._last_ns: int | None = None
-        self._origin: int | None = None
-        self._dt_avg = 0.0
-        self._same = 0  # consecutive steps of the same length (to 1 us): uniform weights
-        self._last_d = 0
         self._uniform: tuple[int, np.ndarray, float] | None = None
-
-    # -- configuration -------------------------------------------------------------------
-    def _configure(self, dt: float) -> None:
-        """Stride and ring for sample period dt (on the first step and when the rate changes)."""
-        self._dt = dt
-        self._stride = max(1, round(SPACING_S / dt))
-        self._every = max(1, round(EVERY_S / dt))
-        cap = (ORDER + 1) * self._stride  # the samples one evaluation spans
-        if cap != self._cap:
-            self._cap = cap
-            self._raw = np.zeros((2 * cap, self.n))  # each sample twice: a window is a view
-            self._rawt = np.zeros(2 * cap)
-        self._count = 0
-
-    def shift(self, offset: np.ndarray) -> None:
-        """A discontinuity of `offset` (n,) at the newest sample: the stored samples are moved
-        by it, so the difference window continues across the jump without seeing it."""
-        self._wcount = 0
-        if self._cap:
-            self._raw += offset
-        self._vcount = 0
-
-    def restart(self) -> None:
-        """No difference across this point (a gap, a re-initialised filter); estimates stay."""
-        self._count = 0
-        self._vcount = 0
-        self._wcount = 0
-        self._last_ns = None
-        self._same = 0
 
     # -- samples -------------------------------------------------------------------------
     def add(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
-        """The sample at t_ns (positions, and velocities or None)."""
-        if self._origin is None:
-            self._origin = t_ns
-        t_s = (t_ns - self._origin) * 1e-9  # relative: full float precision for the weights
-        last = self._last_ns
-        self._last_ns = t_ns
-        if last is not None:
-            d = t_ns - last
-            dt = d * 1e-9
-            if not self._dt:  # the first step sets the stride
-                self._configure(dt)
-                self._dt_avg = dt
-            elif dt > max(GAP_PERIODS * self._dt, GAP_MIN_S):  # a gap: no difference spans it
-                self._count = self._vcount = self._wcount = 0
-            else:  # a new rate (not jitter: the mean moves) reconfigures the stride
-                # a slow mean (~200 samples): a stall and its catch-up burst average out
-                # (with 0.05 one 20 ms stall moved it 100 %: 241 restarts in 4 s of make
-                # demo's stamps, the estimate never ready)
-                self._dt_avg += RATE_ALPHA * (dt - self._dt_avg)
-                off = abs(self._dt_avg - self._dt)
-                if off > 0.25 * self._dt:
-                    self._configure(self._dt_avg)
-                elif off > NOMINAL_TOL * self._dt:  # the nominal period follows the mean
-                    self._dt = self._dt_avg
-            self._same = self._same + 1 if abs(d - self._last_d) <= 1000 else 0
-            self._last_d = d
-        if self._stride:
-            self._add_white(t_s, q)
-            self._add_position(t_s, q)
-        if qd is not None:
-            self._add_velocity(t_s, qd)
+        """The sample at t_ns (positions, and velocities or None): stored (noise_store.py),
+        then the evaluations it makes due."""
+        due = self.store(t_ns, q, qd)
+        if due:
+            if due & WHITE_DUE:
+                self._white_evaluation()
+            if due & POSITION_DUE:
+                self._position_evaluation()
+            if due & VELOCITY_DUE:
+                self._velocity_evaluation()
 
-    def _add_position(self, t_s: float, q: np.ndarray) -> None:
-        """Keep the sample; every `_every` samples, one evaluation from the six blocks that
-        end at this sample. The block sums are taken at the evaluation from the raw ring, not
-        kept as a moving sum updated per sample: that was 4 numpy calls on every sample (and
-        a resummation against drift) for an evaluation every 20 at 1 kHz, and inside a node,
-        whose callbacks run on cold caches, each call costs 3x what it does in a loop."""
-        cap = self._cap
-        c = self._count
-        h = c % cap
-        raw, rawt = self._raw, self._rawt
-        raw[h] = raw[h + cap] = q
-        rawt[h] = rawt[h + cap] = t_s
-        self._count = c = c + 1
-        if c < cap or c % self._every:
-            return
-        s = self._stride
+    # -- evaluations ---------------------------------------------------------------------
+    def _position_evaluation(self) -> None:
+        """One evaluation from the six blocks that end at the newest sample (module
+        docstring)."""
+        ctr = self._ctr
+        cap, s = ctr[Ctr.CAP], ctr[Ctr.STRIDE]
+        h = (ctr[Ctr.COUNT] - 1) % cap
         window = slice(h + 1, h + 1 + cap)  # the last cap samples, oldest first
-        if self._same > cap:  # uniform stamps over the window: the weights of that spacing
+        last_d = ctr[Ctr.LAST_D]
+        if ctr[Ctr.SAME] > cap:  # uniform stamps over the window: the weights of that spacing
             u = self._uniform
-            if u is None or u[0] != self._last_d:
-                span = [(i - ORDER) * s * self._last_d * 1e-9 for i in range(ORDER + 1)]
+            if u is None or u[0] != last_d:
+                span = [(i - ORDER) * s * last_d * 1e-9 for i in range(ORDER + 1)]
                 w, sw = divided_difference_weights(span)
-                u = self._uniform = (self._last_d, np.array(w), sw)
+                u = self._uniform = (last_d, np.array(w), sw)
             _, w, sw = u
         else:  # jittered: the weights of the blocks' mean times, if the blocks compare
-            tw = rawt[window].reshape(ORDER + 1, s)
+            tw = self._rawt[window].reshape(ORDER + 1, s)
             if not self._comparable(tw):
                 self.irregular_windows += 1
                 return
@@ -242,13 +174,13 @@ class NoiseEstimator:
             w = self._w
             w[:] = wl
         sums = self._sums
-        np.sum(raw[window].reshape(ORDER + 1, s, self.n), axis=1, out=sums)
+        np.sum(self._raw[window].reshape(ORDER + 1, s, self.n), axis=1, out=sums)
         z = self._z
         np.dot(w, sums, out=z)  # s x the divided difference of the block means
         z *= z
         z *= 1.0 / (s * sw)  # a block mean of s white samples has variance r^2 / s
         self.evaluations += 1
-        self._accumulate(self.ms, z, self.evaluations, self._every * self._dt)
+        self._accumulate(self.ms, z, self.evaluations, ctr[Ctr.EVERY] * self.period_s)
 
     def _comparable(self, tw: np.ndarray) -> bool:
         """Whether a jittered window's six blocks (their stamps, (6, s)) measure what the
@@ -260,71 +192,60 @@ class NoiseEstimator:
         if tw.shape[1] < MIN_BLOCK:
             return True
         span = tw[-1, -1] - tw[0, 0]
-        if span > WINDOW_STRETCH * (tw.size - 1) * self._dt:
+        if span > WINDOW_STRETCH * (tw.size - 1) * self.period_s:
             return False
         spread = tw.var(axis=1)
         return bool(spread.max() <= BLOCK_SPREAD_RATIO * spread.min())
 
-    def _add_white(self, t_s: float, q: np.ndarray) -> None:
-        """Third difference of consecutive samples (every 8th window above ~400 Hz): the
-        white level, near Nyquist, where no movement is. On uniform stamps the plain
-        difference (-1, 3, -3, 1) / sqrt(20); on jittered ones the third divided difference
-        on the real times, normalised the same way (z^2 / sum w^2): the plain difference of
-        a moving joint sampled at irregular times is not zero (its velocity times the
-        timing irregularity), and that leak read as noise (0.021 deg on an exact elbow
-        through a loaded ROS pipeline, over the 2 x floor that tells exact input)."""
-        c = self._wcount
-        h = c % 4
-        wstride = 8 if self._dt < 2.5e-3 else 1
-        self._wcount = c = c + 1
-        if (-c) % wstride >= 4:
-            return
-        np.copyto(self._wring[h], q)
-        self._wt[h] = t_s
-        if c % wstride or c < 4:
-            return
+    def _white_evaluation(self) -> None:
+        """Third difference of consecutive samples: the white level, near Nyquist, where no
+        movement is. On uniform stamps the plain difference (-1, 3, -3, 1) / sqrt(20); on
+        jittered ones the third divided difference on the real times, normalised the same
+        way (z^2 / sum w^2): the plain difference of a moving joint sampled at irregular
+        times is not zero (its velocity times the timing irregularity), and that leak read as
+        noise (0.021 deg on an exact elbow through a loaded ROS pipeline, over the 2 x floor
+        that tells exact input)."""
+        ctr = self._ctr
+        h = (ctr[Ctr.WCOUNT] - 1) % 4
         z = self._z
-        if self._same >= 3:  # the last three steps equal (to 1 us): the plain difference
+        if ctr[Ctr.SAME] >= 3:  # the last three steps equal (to 1 us): the plain difference
             np.dot(self._d3[h], self._wring, out=z)
             z *= z
             z *= 1.0 / 20.0
         else:
             try:
-                wl, sw = divided_difference_weights(self._wt)
+                wl, sw = divided_difference_weights(self._wt.tolist())
             except ZeroDivisionError:  # a repeated stamp: no difference across it
                 return
             np.dot(np.array(wl), self._wring, out=z)
             z *= z
             z *= 1.0 / sw
         self.white_evaluations += 1
-        a = min(1.0, max(1.0 / self.white_evaluations, wstride * self._dt / TAU_S))
+        wstride = DENSE_STRIDE if self.period_s < DENSE_PERIOD_S else 1
+        a = min(1.0, max(1.0 / self.white_evaluations, wstride * self.period_s / TAU_S))
         z -= self.ms_w
         z *= a
         self.ms_w += z
 
-    def _add_velocity(self, t_s: float, qd: np.ndarray) -> None:
-        c = self._vcount = self._vcount + 1
-        vstride = 8 if self._dt and self._dt < 2.5e-3 else 1
-        if (-c) % vstride >= 3:  # not one of the three samples the next evaluation uses
-            return
-        h = c % 3
-        self._vring[h] = qd
-        self._vt[h] = t_s
-        if c < 3 or c % vstride:
-            return
+    def _velocity_evaluation(self) -> None:
+        """v0 - v1 - rho (v1 - v2) on the newest three stored velocities (module docstring)."""
+        h = self._ctr[Ctr.VCOUNT] % 3
         t0, t1, t2 = self._vt[h], self._vt[(h - 1) % 3], self._vt[(h - 2) % 3]
+        t0, t1, t2 = float(t0), float(t1), float(t2)
         if not (t0 > t1 > t2):
             return
         rho = (t0 - t1) / (t1 - t2)
-        v1, v2 = self._vring[(h - 1) % 3], self._vring[(h - 2) % 3]
+        v0, v1, v2 = self._vring[h], self._vring[(h - 1) % 3], self._vring[(h - 2) % 3]
         z, tmp = self._z, self._tmp
         np.subtract(v1, v2, out=tmp)
         tmp *= rho
-        np.subtract(qd, v1, out=z)
+        np.subtract(v0, v1, out=z)
         z -= tmp
         z *= z
         z *= 1.0 / (1.0 + (1.0 + rho) ** 2 + rho * rho)
         self.velocity_evaluations += 1
+        dt = self.period_s
+        vstride = DENSE_STRIDE if dt and dt < DENSE_PERIOD_S else 1
         self._accumulate(self.ms_v, z, self.velocity_evaluations, vstride * (t0 - t1))
 
     def _accumulate(self, ms: np.ndarray, sq: np.ndarray, k: int, step_s: float) -> None:
@@ -347,11 +268,6 @@ class NoiseEstimator:
         ms += sq
 
     # -- estimates -----------------------------------------------------------------------
-    @property
-    def period_s(self) -> float:
-        """The nominal sample period (s) the stride was set for (0 before the first step)."""
-        return self._dt
-
     @property
     def ready(self) -> bool:
         return self.evaluations >= MIN_EVALUATIONS

@@ -1,0 +1,28 @@
+"""Copies and pickles of an object whose compiled step is bound to its arrays.
+
+Why: a compiled step (kalman_step.Step, noise_step.Store) holds buffers of the arrays it was
+bound to, so a copy must not share it (it would write into the original's arrays) and a
+pickle cannot hold it. The Kalman filter and its noise estimator both are such objects: the
+copy drops the step and binds its own to its own arrays.
+"""
+
+from __future__ import annotations
+
+
+class BindsCompiled:
+    """`_fast` is the compiled step (None: Python's way); `_bind()` binds it to the object's
+    arrays. Copies and pickles leave it out and bind their own."""
+
+    _fast = None
+
+    def _bind(self) -> None:
+        raise NotImplementedError
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_fast"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind()

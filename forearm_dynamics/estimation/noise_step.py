@@ -1,0 +1,48 @@
+"""The noise estimator's per-sample store as one compiled call (_noise_step.c).
+
+Why: issue 29 item 5 gives the default estimator +20 µs of a torque node's callback over the
+backward difference, and after the Kalman's compiled step (kalman_step.py) the noise
+statistics' bookkeeping was most of what was left: NoiseEstimator.add took 24 µs p50 paced
+at 1 kHz offline (a 0.9 ms sleep before each call, jittered stamps, load ~0.2), ~5 µs back
+to back. In a node each numpy call and each Python line costs several times what it does
+in a loop (the process sleeps between samples and its caches go cold), and storing a sample
+was ~40 lines and 4-6 numpy calls: the rate, the counters, three rings. The compiled store
+does all of it in one call (noise_store.SampleRings.store); what it makes due (an
+evaluation: one sample in ~4 at 1 kHz) still runs in Python (noise.py), the same code both
+ways. The store only copies and counts, and its rate arithmetic is Python's to the bit (built
+without fused multiply-add), so the estimates are the same numbers with and without it
+(test_noise_step.py).
+
+The extension is optional: setup.py builds it where a C compiler is (`pip install`,
+`colcon build`); without it, or for arrays it cannot take (not contiguous float64), the
+estimator stores in Python (SampleRings._store), the reference the tests compare it with.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    from ._noise_step import FIELDS, Store
+except ImportError:  # pragma: no cover - built without a C compiler: Python's way
+    FIELDS, Store = "", None
+
+
+def bind(ctr: np.ndarray, rate: np.ndarray, raw: np.ndarray, rawt: np.ndarray,
+         wring: np.ndarray, wt: np.ndarray, vring: np.ndarray, vt: np.ndarray,
+         fields: list[str], params: tuple):
+    """A Store on the estimator's own arrays (written in place), or None without the
+    extension. `fields`: noise_store.Ctr's names, then Rate's, in order, which must be the
+    extension's (a RuntimeError otherwise: the two would read each other's counters); `params`: the
+    constants _noise_step.c's header lists, from noise_store.py."""
+    if Store is None:
+        return None
+    if fields != FIELDS.split():
+        raise RuntimeError(f"noise_store's fields {fields} are not _noise_step.c's "
+                           f"{FIELDS.split()}: rebuild the extension (pip install / colcon build)")
+    return Store(ctr, rate, raw, rawt, wring, wt, vring, vt, params)
+
+
+def available() -> bool:
+    """Whether the compiled store was built (the estimator uses it)."""
+    return Store is not None
