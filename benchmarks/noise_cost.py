@@ -24,16 +24,9 @@ from forearm_dynamics.estimation.noise import NoiseEstimator
 WARMUP = 1000
 
 
-def python_store(est: NoiseEstimator) -> NoiseEstimator:
-    """The same estimator storing in Python (no compiled store, now or after a new rate)."""
-    est._fast = None
-    est._bind = lambda: None
-    return est
-
-
 def run(joints: int, samples: int, velocities: bool, compiled: bool, paced: bool) -> np.ndarray:
     rng = np.random.default_rng(0)
-    est = NoiseEstimator(joints) if compiled else python_store(NoiseEstimator(joints))
+    est = NoiseEstimator(joints) if compiled else NoiseEstimator(joints).python_store()
     q, qd = np.zeros(joints), np.zeros(joints)
     t_ns, out = 10**18, []
     clock = time.perf_counter_ns

@@ -23,7 +23,6 @@ from forearm_dynamics.estimation.noise_store import (
     NOT_STORED,
     Ctr,
     Rate,
-    SampleRings,
     fields,
 )
 
@@ -31,13 +30,6 @@ pytestmark = pytest.mark.unit
 
 N = 20
 T0 = 1_700_000_000_000_000_000
-
-
-def python_only(est: SampleRings) -> SampleRings:
-    """The same estimator storing in Python: no compiled store, now or after a new rate."""
-    est._fast = None
-    est._bind = lambda: None
-    return est
 
 
 def test_the_compiled_store_is_built() -> None:
@@ -101,7 +93,7 @@ def test_whole_streams_give_pythons_estimates_to_the_bit(kind, rate, vel) -> Non
     store = fast._store
     fast._store = lambda *a: left.append(a[0]) or store(*a)
     a = _run(fast, stamps, z, zd if vel else None)
-    b = _run(python_only(NoiseEstimator(N)), stamps, z, zd if vel else None)
+    b = _run(NoiseEstimator(N).python_store(), stamps, z, zd if vel else None)
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
     assert a["counts"][0] > 0 and a["counts"][1] > 0 and (a["counts"][2] > 0) == vel
@@ -126,7 +118,7 @@ def test_through_the_kalman_filter_the_same_estimates() -> None:
     z = q + math.radians(0.3) * rng.standard_normal(q.shape)
     stamps = T0 + np.round(t * 1e9 + rng.uniform(-1e5, 1e5, len(t))).astype(np.int64)
     fast, slow = make_estimator("kalman", N), make_estimator("kalman", N)
-    python_only(slow.noise_estimator)
+    slow.noise_estimator.python_store()
     for k in range(len(stamps)):
         for est in (fast, slow):
             est.update(int(stamps[k]), z[k], None)

@@ -66,8 +66,6 @@ import math
 import numpy as np
 
 from .noise_store import (  # noqa: F401 - the rate's constants are noise's public ones
-    DENSE_PERIOD_S,
-    DENSE_STRIDE,
     GAP_MIN_S,
     GAP_PERIODS,
     NOMINAL_TOL,
@@ -76,6 +74,7 @@ from .noise_store import (  # noqa: F401 - the rate's constants are noise's publ
     WHITE_DUE,
     Ctr,
     SampleRings,
+    dense_stride,
 )
 
 SPACING_S = 0.05
@@ -221,8 +220,8 @@ class NoiseEstimator(SampleRings):
             z *= z
             z *= 1.0 / sw
         self.white_evaluations += 1
-        wstride = DENSE_STRIDE if self.period_s < DENSE_PERIOD_S else 1
-        a = min(1.0, max(1.0 / self.white_evaluations, wstride * self.period_s / TAU_S))
+        dt = self.period_s
+        a = min(1.0, max(1.0 / self.white_evaluations, dense_stride(dt) * dt / TAU_S))
         z -= self.ms_w
         z *= a
         self.ms_w += z
@@ -244,9 +243,8 @@ class NoiseEstimator(SampleRings):
         z *= z
         z *= 1.0 / (1.0 + (1.0 + rho) ** 2 + rho * rho)
         self.velocity_evaluations += 1
-        dt = self.period_s
-        vstride = DENSE_STRIDE if dt and dt < DENSE_PERIOD_S else 1
-        self._accumulate(self.ms_v, z, self.velocity_evaluations, vstride * (t0 - t1))
+        self._accumulate(self.ms_v, z, self.velocity_evaluations,
+                         dense_stride(self.period_s) * (t0 - t1))
 
     def _accumulate(self, ms: np.ndarray, sq: np.ndarray, k: int, step_s: float) -> None:
         """Running mean over the first evaluations, then exponential (TAU_S); winsorised."""

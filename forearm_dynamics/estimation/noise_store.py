@@ -46,6 +46,14 @@ GAP_MIN_S = 0.04  # a step shorter than this is never a gap: a late publisher, n
 DENSE_PERIOD_S = 2.5e-3
 DENSE_STRIDE = 8
 
+
+def dense_stride(dt: float) -> int:
+    """Every how many windows the white and velocity differences take one at period dt
+    (s; 0 before the first step): DENSE_STRIDE above ~400 Hz, else every one. The stores and
+    the evaluations that weight their steps use this one rule."""
+    return DENSE_STRIDE if 0.0 < dt < DENSE_PERIOD_S else 1
+
+
 #: what a stored sample makes due (SampleRings.store; the compiled store returns the same)
 WHITE_DUE, POSITION_DUE, VELOCITY_DUE = 1, 2, 4
 NOT_STORED = -1  # the compiled store left the sample to _store (a first step, a new rate)
@@ -79,10 +87,6 @@ class Rate:
     STRIDE_DT = 2  # the period the stride was set for: past NEW_RATE off it, a new stride
 
 
-#: what a stored sample makes due (SampleRings.store; the compiled store returns the same)
-WHITE_DUE, POSITION_DUE, VELOCITY_DUE = 1, 2, 4
-NOT_STORED = -1  # the compiled store left the sample to _store (a first step, a new rate)
-
 
 def fields(layout: type) -> list[str]:
     """A layout's (Ctr's, Rate's) field names in index order: what _noise_step.c's FIELDS
@@ -109,10 +113,20 @@ class SampleRings(BindsCompiled):
         self._vring = np.zeros((3, n))  # the velocity difference's three samples
         self._vt = np.zeros(3)
         self._fast = None
+        self._compiled = True  # python_store() turns it off: the reference the tests compare
         self._bind()
+
+    def python_store(self) -> SampleRings:
+        """Store in Python from now on, after a new rate too (the compiled store's reference:
+        test_noise_step.py, benchmarks/noise_cost.py); returns self."""
+        self._compiled = False
+        self._fast = None
+        return self
 
     def _bind(self) -> None:
         """The compiled store on this estimator's arrays (noise_step.py; None: Python's way)."""
+        if not self._compiled:
+            return
         self._fast = noise_step.bind(self._ctr, self._rate, self._raw, self._rawt, self._wring,
                                      self._wt, self._vring, self._vt,
                                      fields(Ctr) + fields(Rate),
@@ -210,7 +224,7 @@ class SampleRings(BindsCompiled):
         ctr = self._ctr
         c = ctr[Ctr.WCOUNT]
         h = c % 4
-        wstride = DENSE_STRIDE if dt < DENSE_PERIOD_S else 1
+        wstride = dense_stride(dt)
         ctr[Ctr.WCOUNT] = c = c + 1
         if (-c) % wstride >= 4:
             return 0
@@ -236,7 +250,7 @@ class SampleRings(BindsCompiled):
         ctr = self._ctr
         c = ctr[Ctr.VCOUNT] + 1
         ctr[Ctr.VCOUNT] = c
-        vstride = DENSE_STRIDE if dt and dt < DENSE_PERIOD_S else 1
+        vstride = dense_stride(dt)
         if (-c) % vstride >= 3:  # not one of the three samples the next evaluation uses
             return 0
         h = c % 3
