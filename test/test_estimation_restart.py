@@ -16,6 +16,7 @@ import pytest
 
 from forearm_dynamics import get_movement
 from forearm_dynamics.estimation import ca_model, make_estimator
+from forearm_dynamics.estimation.noise_groups import Col
 
 pytestmark = pytest.mark.unit
 
@@ -108,7 +109,7 @@ def test_the_covariance_says_so_and_returns_to_the_steady_state() -> None:
         if i == i0 + 2:
             assert (est.covariance()[:, 2, 2] > 5.0 * steady).all()  # 7 x (before: 1 x)
         if i > i0:  # the sample after the restart seats the groups diffuse
-            steps.append(all(g.still for g in est._groups))
+            steps.append(bool(est._gstate[:, Col.STILL].all()))
     settled = steps.index(True)
     assert 10 < settled < 300, settled  # 0.5 deg at 1 kHz: back at steady after ~150 samples
     assert all(steps[settled:])

@@ -10,17 +10,20 @@ from __future__ import annotations
 
 
 class BindsCompiled:
-    """`_fast` is the compiled step (None: Python's way); `_bind()` binds it to the object's
-    arrays. Copies and pickles leave it out and bind their own."""
+    """`_fast` is the compiled step (None: Python's way), and so is every attribute named in
+    COMPILED; `_bind()` binds them to the object's arrays. Copies and pickles leave them out
+    and bind their own."""
 
     _fast = None
+    COMPILED: tuple[str, ...] = ("_fast",)
 
     def _bind(self) -> None:
         raise NotImplementedError
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
-        state["_fast"] = None
+        for name in self.COMPILED:
+            state[name] = None
         return state
 
     def __setstate__(self, state: dict) -> None:

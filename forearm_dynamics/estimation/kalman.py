@@ -5,7 +5,8 @@ The parts, each in its own module and tested alone: the model and its discretisa
 fixed-lag smoother (smoother.py), and two mixins of the filter: its noise groups and their
 covariance recursions (noise_groups.py) and its per-joint noise belief (noise_belief.py);
 the per-sample arithmetic (predict, innovations, correction) runs as two compiled calls
-where the C extension is built (kalman_step.py), numpy's way otherwise.
+where the C extension is built (kalman_step.py), numpy's way otherwise, and so does the
+step of noise groups seated at their steady state (kalman_step.Gains, noise_groups.py).
 This module is the filter that wires them.
 
 Filter: state X = [q; qd; qdd] (3, n); per sample X = F X (predict), X += K (.) E (correct
@@ -110,7 +111,7 @@ from .gate import MAX_PER_WINDOW as GATE_MAX_PER_WINDOW  # noqa: F401 - public A
 from .gate import JumpGate
 from .noise import NoiseEstimator
 from .noise_belief import NoiseBelief
-from .noise_groups import NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
+from .noise_groups import Col, NoiseGroup, NoiseGroups, _Group  # noqa: F401 - NoiseGroup: public API
 from .practice_blend import PracticeBlend
 from .practice_fir import PracticeFIR
 from .practice_lag import PracticeLag
@@ -195,8 +196,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         self._groups_version = 0
         self._gidx = np.zeros(n, np.intp)
         self._bins = np.full((2, n), -10**6)
-        self._Kg = np.zeros((6, 1))
-        self._Sg = np.zeros(1)
+        self._gstate = np.zeros((0, Col.WIDTH))  # the groups' numbers, a row each (noise_groups)
         self._vel: bool | None = None
         self._armed = self._fixed_r is not None
         self._applied = [False, False]  # a measured (position, velocity) noise is in use
@@ -231,11 +231,15 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         self._bind()
         self.reset()
 
+    COMPILED = ("_fast", "_gfast")  # BindsCompiled: copies and pickles bind their own
+
     def _bind(self) -> None:
         """Predict, innovations, correction and the copies after it as two compiled calls on
-        this filter's arrays (kalman_step.py; None: numpy's way)."""
+        this filter's arrays (kalman_step.py; None: numpy's way), and the noise groups' step
+        (noise_groups.py)."""
         self._fast = kalman_step.bind(self._X, self._T3, self._E, self._Kp, self._Kv, self._out,
                                       self._pend_q, self._pend_qd)
+        self._bind_gains()
 
     def __setstate__(self, state: dict) -> None:
         super().__setstate__(state)  # BindsCompiled: its own compiled step
@@ -261,9 +265,8 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         if self._smoother is not None and self._smoother.cov is not None:
             return self._smoother.cov.copy()
         out = np.zeros((self.n, 3, 3))
-        for g in self._groups:
-            if g.P is not None:
-                out[g.idx] = ca_model.to_matrix(g.P)
+        for i, g in enumerate(self._groups):
+            out[g.idx] = self._group_covariance(i)
         return out
 
     # -- state ----------------------------------------------------------------------------
@@ -457,10 +460,11 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
     def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
         """q, qd: 0 (exact for constant acceleration); qdd: steady-state error / jerk of the
         noisiest joint's gain (a delay shortens it: the smoothed estimate is centred)."""
-        g = max(self._groups, key=lambda g: g.r, default=None)
+        i = max(range(len(self._groups)), key=lambda i: self._groups[i].r, default=None)
         m = 2 if velocity_given else 1
-        if g is not None and len(g.k) == 3 * m and abs(g.dt - dt) <= 1e-3 * dt:
-            k = np.array(g.k).reshape(3, m)  # the gain in use: no Riccati solve on a node thread
+        k = None if i is None else self._group_gain(i, m)
+        if k is not None and abs(self._gstate[i, Col.DT] - dt) <= 1e-3 * dt:
+            pass  # the gain in use: no Riccati solve on a node thread
         else:
             r = float(self._r.max())
             k, _ = steady_state(dt, r, float(self._rv.max()) if velocity_given else None, self.psd)

@@ -1,4 +1,5 @@
-"""The Kalman filter's per-sample arithmetic as two compiled calls (_kalman_step.c).
+"""The Kalman filter's per-sample arithmetic as two compiled calls (_kalman_step.c), and its
+noise groups' covariance step as a third (Gains: noise_groups.py says why).
 
 Why: issue 29 item 5 gives the default estimator +20 µs of a torque node's callback over the
 backward difference. In a node at 1 kHz each numpy call costs a few µs, not the ~0.5 µs of a
@@ -20,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 try:
-    from ._kalman_step import Step
+    from . import _kalman_step
+    from ._kalman_step import Gains, Step
 except ImportError:  # pragma: no cover - built without a C compiler: numpy's way
-    Step = None
+    _kalman_step = Gains = Step = None
 
 
 def bind(x: np.ndarray, t3: np.ndarray, e: np.ndarray, kp: np.ndarray, kv: np.ndarray,
@@ -34,6 +36,25 @@ def bind(x: np.ndarray, t3: np.ndarray, e: np.ndarray, kp: np.ndarray, kv: np.nd
     then keep_q = q and keep_qd = qd where given (the sample the noise statistics take after
     the output), out = x if copy_out (the causal output)."""
     return None if Step is None else Step(x, t3, e, kp, kv, out, keep_q, keep_qd)
+
+
+def bind_gains(state: np.ndarray, layout: dict[str, int], gidx: np.ndarray, r_gate: np.ndarray,
+               kp: np.ndarray, kv: np.ndarray, sig: np.ndarray):
+    """A Gains on the noise groups' state (G, WIDTH) and the filter's per-joint arrays, or None
+    without the extension or without a group.
+
+    Gains.step(dt, period, psd, vel, jitter) -> 1, 0 or -1: the covariance step of groups
+    seated at their steady state (noise_groups.py), the gains written into kp, kv and the
+    innovation stds into sig (1), nothing to do (0), or a group that is not seated (-1:
+    nothing written, Python's loop runs). `layout` (column name -> index) must be the
+    extension's: a layout that is not raises RuntimeError (a stale build)."""
+    if Gains is None or not len(state):
+        return None
+    for name, at in layout.items():
+        if getattr(_kalman_step, name, None) != at:
+            raise RuntimeError(f"_kalman_step's group column {name} is not {at}: rebuild the "
+                               "extension (pip install / colcon build)")
+    return Gains(state, gidx, r_gate, kp, kv, sig)
 
 
 def available() -> bool:

@@ -17,6 +17,13 @@ slow mode (velocities given, its variance falls from r^2 as the velocities integ
 recursion running for seconds. `NoiseGroups` is a mixin of
 KalmanCA: it reads the filter's noise beliefs (_r, _rv, _r_gate, _floor,
 _fixed_r, _fixed_rv) and writes the per-joint gains (_Kp, _Kv) and innovation stds (_sig).
+
+The groups' numbers live in one array, a row per group (`Col`), so that the step of seated
+groups, the one a node runs at every sample its clock moves by more than JITTER, is one
+compiled call with the per-joint gains after it (kalman_step.bind_gains): in Python it was
+a loop of ~20 lines per group and 5 numpy calls, 8 us p50 of a 20-joint node's update()
+(benchmarks/estimator_probe). Python's loop (_python_covariance_step) is the reference and
+does the rest (a restart, a group settling, a new rate); test_group_step.py compares them.
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import ca_model
+from . import ca_model, kalman_step
 
 BIN = math.log(math.sqrt(2.0))  # noise bins a factor sqrt(2) apart
 HYSTERESIS = 0.6  # a joint leaves its bin when 0.6 bin away from its centre
@@ -49,24 +56,52 @@ class NoiseGroup:
     dt: float
 
 
+class Col:
+    """A group's row in NoiseGroups._gstate (plain ints; the extension checks them by name):
+    posterior P and prior M (ca_model.Cov layout), gain K (rows q, q̇, q̈ of the position gain,
+    then of the velocity gain), the last step's dt (-1: none yet), STILL (its gain is kept
+    at a repeating dt), SEATED (P is the steady state at this nominal period; 0: it is not),
+    the noise R, RV, and SETTLING (seated diffuse by a restart, not yet back at steady state)."""
+
+    P = 0
+    M = 6
+    K = 12
+    DT = 18
+    STILL = 19
+    SEATED = 20
+    R = 21
+    RV = 22
+    SETTLING = 23
+    WIDTH = 24
+
+    @classmethod
+    def layout(cls) -> dict[str, int]:
+        return {k: v for k, v in vars(cls).items() if k.isupper()}
+
+
+@dataclass(frozen=True)
 class _Group:
-    """Joints that share a noise level: one covariance recursion."""
+    """Joints that share a noise level (a bin pair `key`): one covariance recursion, whose
+    numbers are the group's row of NoiseGroups._gstate."""
 
-    __slots__ = ("M", "P", "dt", "idx", "k", "key", "r", "rv", "seated_at", "settling", "still")
+    key: tuple[int, int]
+    r: float
+    rv: float
+    idx: np.ndarray
 
-    def __init__(self, key: tuple[int, int], r: float, rv: float, idx: np.ndarray):
-        self.key, self.r, self.rv, self.idx = key, r, rv, idx
-        self.P: tuple | None = None
-        self.M: tuple = (0.0,) * 6
-        self.k: tuple = ()
-        self.dt = -1.0
-        self.still = False
-        self.settling = False  # seated diffuse by a restart, not yet back at steady state
-        self.seated_at = 0.0  # P is the steady state at this nominal period (0: it is not)
+
+def _new_row(r: float, rv: float) -> np.ndarray:
+    row = np.zeros(Col.WIDTH)
+    row[Col.DT] = -1.0
+    row[Col.R], row[Col.RV] = r, rv
+    return row
 
 
 class NoiseGroups:
     """Mixin of KalmanCA: the groups, their recursions, the per-joint gains; see above."""
+
+    _gfast = None  # kalman_step.Gains on _gstate (None: Python's loop)
+    _gcompiled = True  # False: Python's loop always (python_gains())
 
     @property
     def groups_version(self) -> int:
@@ -78,13 +113,44 @@ class NoiseGroups:
         """The groups of joints sharing a noise level and a gain, as the last step used them
         (for torque uncertainty: issue 19's state_source reads these, nothing private)."""
         out = []
-        for g in self._groups:
-            if g.P is None or not g.k:
+        m = 2 if self._vel else 1
+        for i, g in enumerate(self._groups):
+            gain = self._group_gain(i, m)
+            if gain is None:
                 continue
-            m = len(g.k) // 3
-            out.append(NoiseGroup(g.idx.copy(), g.r, g.rv if m == 2 else None,
-                                  np.array(g.k).reshape(3, m), ca_model.to_matrix(g.M), g.dt))
+            row = self._gstate[i]
+            out.append(NoiseGroup(g.idx.copy(), g.r, g.rv if m == 2 else None, gain,
+                                  ca_model.to_matrix(row[Col.M:Col.M + 6].tolist()),
+                                  float(row[Col.DT])))
         return out
+
+    def _group_gain(self, i: int, m: int) -> np.ndarray | None:
+        """Group i's gain (3, m) of its last step; None before one, or if it was for the other
+        measurement set (m: 1 positions, 2 with velocities)."""
+        row = self._gstate[i]
+        if row[Col.DT] < 0.0 or m != (2 if self._vel else 1):
+            return None
+        k = row[Col.K:Col.K + 3 * m]
+        return k.reshape(m, 3).T.copy()
+
+    def _group_covariance(self, i: int) -> np.ndarray:
+        return ca_model.to_matrix(self._gstate[i, Col.P:Col.P + 6].tolist())
+
+    def python_gains(self):
+        """Step the groups in Python from now on, after a regroup too (the compiled step's
+        reference: test_group_step.py; the tests that count ca_model.prior calls); returns
+        self."""
+        self._gcompiled = False
+        self._gfast = None
+        return self
+
+    def _bind_gains(self) -> None:
+        """The seated groups' step as one compiled call on this filter's arrays (None: Python's
+        loop): bound again whenever the groups (so _gstate) change."""
+        if not self._gcompiled:
+            return
+        self._gfast = kalman_step.bind_gains(self._gstate, Col.layout(), self._gidx,
+                                             self._r_gate, self._Kp, self._Kv, self._sig)
 
     def _regroup(self, vel: bool, dt: float) -> None:
         """Bin each joint's noise (hysteresis) and rebuild the groups if the bins changed."""
@@ -103,32 +169,32 @@ class NoiseGroups:
                 changed = True
         if not changed and self._groups:
             return
-        old = {g.key: g for g in self._groups}
+        old = {g.key: i for i, g in enumerate(self._groups)} if vel == self._vel else {}
         keys: dict[tuple[int, int], list[int]] = {}
         for j in range(self.n):
             keys.setdefault((int(self._bins[0, j]), int(self._bins[1, j])), []).append(j)
         groups = []
+        state = np.zeros((len(keys), Col.WIDTH))
+        period = self.noise_estimator.period_s or dt
         for i, (key, idx) in enumerate(sorted(keys.items())):
             r = self._floor * math.exp(key[0] * BIN) if self._fixed_r is None else self._fixed_r
             rv = (self._floor * math.exp(key[1] * BIN) if self._fixed_rv is None else self._fixed_rv)
-            g = old.get(key) if vel == self._vel else None
-            if g is None:
-                g = _Group(key, r, rv, np.array(idx, np.intp))
-            else:
-                g.idx = np.array(idx, np.intp)
+            g = _Group(key, r, rv, np.array(idx, np.intp))
+            if key in old:  # the same recursion goes on
+                state[i] = self._gstate[old[key]]
+            else:  # seated at its steady state (cached per period and noise bin)
+                state[i] = _new_row(r, rv)
+                state[i, Col.P:Col.P + 6] = ca_model.steady_posterior(period, r, rv if vel else None,
+                                                                      self.psd)
+                state[i, Col.SEATED] = period
+            state[i, Col.STILL] = 0.0
             self._gidx[g.idx] = i
             groups.append(g)
         self._groups = groups
+        self._gstate = state
         self._groups_version += 1
         self._vel = vel
-        self._Kg = np.zeros((6, len(groups)))
-        self._Sg = np.zeros(len(groups))
-        for g in groups:
-            g.still = False
-            if g.P is None:  # seat it at its steady state (cached per period and noise bin)
-                period = self.noise_estimator.period_s or dt
-                g.P = ca_model.steady_posterior(period, g.r, g.rv if vel else None, self.psd)
-                g.seated_at = period
+        self._bind_gains()
         if self._smoother is not None:
             self._smooth_dt = 0.0  # new gains at the next step
 
@@ -140,59 +206,77 @@ class NoiseGroups:
         when the step leaves JITTER of the period (a dropped sample, a gap) and then once
         more when it is back. On a jittered stream (a sensor's clock, the publisher's wall
         clock: a new dt every sample) the recursion ran on every sample otherwise: 32 of 91 us
-        of update() at 1 kHz with velocities, paced like the node (/tmp A/B, load 2.5)."""
-        changed = False
+        of update() at 1 kHz with velocities, paced like the node (/tmp A/B, load 2.5).
+        Seated groups: one compiled call (module docstring); the rest: Python's loop."""
         period = self.noise_estimator.period_s or dt
         if self._restarted:  # seated diffuse: the recursion runs until it is steady again
             self._restarted = False
-            for g in self._groups:
-                g.P = ca_model.restart_posterior(g.r, g.rv if vel else None, self.psd,
-                                                 RESTART_HORIZON_S)
-                g.still = False
-                g.settling = True
-                g.seated_at = 0.0
+            state = self._gstate
+            for i, g in enumerate(self._groups):
+                state[i, Col.P:Col.P + 6] = ca_model.restart_posterior(
+                    g.r, g.rv if vel else None, self.psd, RESTART_HORIZON_S)
+                state[i, Col.STILL] = state[i, Col.SEATED] = 0.0
+                state[i, Col.SETTLING] = 1.0
             self._groups_version += 1
+        if self._gfast is not None and self._gfast.step(dt, period, self.psd, vel, JITTER) >= 0:
+            return
+        self._python_covariance_step(dt, vel, period)
+
+    def _python_covariance_step(self, dt: float, vel: bool, period: float) -> None:
+        """_covariance_step's loop in Python: the reference, and the step of groups that are
+        not seated (a restart settling, a new rate)."""
+        changed = False
         near = abs(dt - period) <= JITTER * period
-        kg, sg = self._Kg, self._Sg
+        state = self._gstate
         for i, g in enumerate(self._groups):
-            if g.still and dt == g.dt:
+            row = state[i].tolist()
+            still, gdt = row[Col.STILL] != 0.0, row[Col.DT]
+            if still and dt == gdt:
                 continue
-            seated = g.seated_at and abs(g.seated_at - period) <= JITTER * period
-            if seated and g.still and near:
+            seated_at = row[Col.SEATED]
+            seated = seated_at != 0.0 and abs(seated_at - period) <= JITTER * period
+            if seated and still and near:
                 continue  # its gain is a step's from the steady state within JITTER: kept
-            m = ca_model.prior(g.P, dt, self.psd)
-            r2 = g.r * g.r
-            k, p = ca_model.measurement_update(m, r2, g.rv * g.rv if vel else None)
-            old = g.P
+            old = tuple(row[Col.P:Col.P + 6])
+            m = ca_model.prior(old, dt, self.psd)
+            k, p = ca_model.measurement_update(m, g.r * g.r, g.rv * g.rv if vel else None)
             if seated:  # the steady state stays: this step's gain is all that moves
                 p = old
-                g.still = near
+                still = near
             else:
-                g.seated_at = 0.0
-                if g.settling:  # (q̇, q̈) back within SETTLED of the steady state: seated there
+                seated_at = 0.0
+                if row[Col.SETTLING]:  # (q̇, q̈) back within SETTLED of the steady state: seated
                     ss = ca_model.steady_posterior(period, g.r, g.rv if vel else None, self.psd)
                     if all(abs(p[i] - ss[i]) <= SETTLED * abs(ss[i]) for i in (3, 4, 5)):
-                        p, g.settling, g.seated_at = ss, False, period
-                g.still = dt == g.dt and all(abs(a - b) <= 1e-12 * abs(a) + 1e-300 for a, b in zip(p, old))
-            g.P, g.M, g.k, g.dt = p, m, k, dt
-            if vel:
-                kg[0, i], kg[3, i], kg[1, i], kg[4, i], kg[2, i], kg[5, i] = k
+                        p, seated_at = ss, period
+                        state[i, Col.SETTLING] = 0.0
+                still = dt == gdt and all(abs(a - b) <= 1e-12 * abs(a) + 1e-300 for a, b in zip(p, old))
+            state[i, Col.P:Col.P + 6] = p
+            state[i, Col.M:Col.M + 6] = m
+            if vel:  # k: (k00, k01, k10, k11, k20, k21), row by row
+                state[i, Col.K:Col.K + 6] = k[0::2] + k[1::2]
             else:
-                kg[0, i], kg[1, i], kg[2, i] = k
-            sg[i] = m[0]
+                state[i, Col.K:Col.K + 3] = k
+            state[i, Col.DT] = dt
+            state[i, Col.STILL] = still
+            state[i, Col.SEATED] = seated_at
             changed = True
         if changed:
-            gi = self._gidx
-            np.take(kg[:3], gi, axis=1, out=self._Kp)
-            if vel:
-                np.take(kg[3:], gi, axis=1, out=self._Kv)
-            self._innovation_std()
+            self._joint_gains(vel)
+
+    def _joint_gains(self, vel: bool) -> None:
+        """The per-joint gains from their groups', and the innovation stds."""
+        gi, state = self._gidx, self._gstate
+        np.take(state[:, Col.K:Col.K + 3].T, gi, axis=1, out=self._Kp)
+        if vel:
+            np.take(state[:, Col.K + 3:Col.K + 6].T, gi, axis=1, out=self._Kv)
+        self._innovation_std()
 
     def _innovation_std(self) -> None:
         """Per joint innovation std with the noise as measured: the group's prior variance
         plus the gate's r^2."""
         sig = self._sig
-        np.take(self._Sg, self._gidx, out=sig)
+        np.take(self._gstate[:, Col.M], self._gidx, out=sig)
         np.multiply(self._r_gate, self._r_gate, out=self._tmp)
         sig += self._tmp
         np.sqrt(sig, out=sig)

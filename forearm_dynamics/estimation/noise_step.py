@@ -4,7 +4,8 @@ Why: issue 29 item 5 gives the default estimator +20 µs of a torque node's call
 backward difference, and after the Kalman's compiled step (kalman_step.py) the noise
 statistics' bookkeeping was most of what was left: NoiseEstimator.add took 22-27 µs p50
 paced at 1 kHz offline (a 0.9 ms sleep before each call, jittered stamps), 4-7 µs back to
-back; with the compiled store 3-4 µs paced (benchmarks/noise_cost.py, docs/performance.md).
+back; with the compiled store 3-4 µs paced (benchmarks/compiled_cost.py --part noise,
+docs/performance.md).
 In a node each numpy call and each Python line costs several times what it does in a loop
 (the process sleeps between samples and its caches go cold), and storing a sample was ~40
 lines and 4-6 numpy calls: the rate, the counters, three rings. The compiled store

@@ -118,7 +118,7 @@ class SampleRings(BindsCompiled):
 
     def python_store(self) -> SampleRings:
         """Store in Python from now on, after a new rate too (the compiled store's reference:
-        test_noise_step.py, benchmarks/noise_cost.py); returns self."""
+        test_noise_step.py, benchmarks/compiled_cost.py); returns self."""
         self._compiled = False
         self._fast = None
         return self
