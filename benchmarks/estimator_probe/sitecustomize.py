@@ -1,11 +1,17 @@
-"""Times the Kalman filter's update() and learn() inside a running torque_node (issue 29 item 5).
+"""Times the estimator and the callback's parts inside a running torque_node (issue 29 item 5).
 
 Why: the node's callback p50 moves by ±20 µs between runs of the same code (other load,
 caches), more than a change to one part of the estimator; timing the parts inside the node
 resolves a few µs. Not imported unless asked: with this directory on PYTHONPATH and
-ESTIMATOR_PROBE=FILE set, every torque_node process wraps KalmanCA.update and KalmanCA.learn
-with perf_counter_ns and, at exit, appends one line to FILE (p50 / p90 / p99 in µs of both;
-learn only where it had a sample to take). Example (docs/performance.md):
+ESTIMATOR_PROBE=FILE set, every torque_node process wraps, with perf_counter_ns, the
+estimator's update() (KalmanCA's: `update`, BackwardDifference's: `backward_update`),
+KalmanCA.learn (only where it had
+a sample to take), the torques (ModelBundle.torques: the RNEA), TorqueNode.compute (the
+callback's work from the decoded sample to the torques, the update and the torques inside
+it) and TorqueNode.after_output (after the publish: learn(), the σ when published), and at
+exit appends one line to FILE: p50 / p90 / p99 in µs of each part that ran. With --choices
+default,backward_estimator the two nodes' lines compare part by part. Example
+(docs/performance.md):
 
     ESTIMATOR_PROBE=/tmp/probe.txt PYTHONPATH=benchmarks/estimator_probe \\
         python -m benchmarks --sections choices --choices default --out /tmp/probe.json
@@ -17,17 +23,29 @@ import sys
 import time
 
 if os.environ.get("ESTIMATOR_PROBE") and "torque_node" in " ".join(sys.argv):
-    from forearm_dynamics.estimation import kalman
+    from forearm_dynamics.estimation import backward, kalman
+    from forearm_dynamics.nodes import torque_config, torque_node
 
-    _update, _learn = kalman.KalmanCA.update, kalman.KalmanCA.learn
-    _times: dict[str, list[int]] = {"update": [], "learn": []}
+    _times: dict[str, list[int]] = {}
     _clock = time.perf_counter_ns
 
-    def _timed_update(self, *args):
-        t = _clock()
-        warm = _update(self, *args)
-        _times["update"].append(_clock() - t)
-        return warm
+    def _wrap(cls, name: str, key: str) -> None:
+        """cls.name timed into _times[key]."""
+        f = getattr(cls, name)
+        times = _times.setdefault(key, [])
+
+        def timed(self, *args):
+            t = _clock()
+            out = f(self, *args)
+            times.append(_clock() - t)
+            return out
+
+        setattr(cls, name, timed)
+
+    _wrap(kalman.KalmanCA, "update", "update")
+    _wrap(backward.BackwardDifference, "update", "backward_update")
+    _learn = kalman.KalmanCA.learn
+    _times["learn"] = []
 
     def _timed_learn(self):
         pending = self._pending
@@ -36,7 +54,10 @@ if os.environ.get("ESTIMATOR_PROBE") and "torque_node" in " ".join(sys.argv):
         if pending:
             _times["learn"].append(_clock() - t)
 
-    kalman.KalmanCA.update, kalman.KalmanCA.learn = _timed_update, _timed_learn
+    kalman.KalmanCA.learn = _timed_learn
+    _wrap(torque_config.ModelBundle, "torques", "torques")
+    _wrap(torque_node.TorqueNode, "compute", "compute")
+    _wrap(torque_node.TorqueNode, "after_output", "after_output")
 
     def _report() -> None:
         import numpy as np
