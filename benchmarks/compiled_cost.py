@@ -42,18 +42,32 @@ def stream(joints: int, samples: int):
         yield t_ns, q, qd
 
 
-def run_noise(joints: int, samples: int, velocities: bool, compiled: bool,
-              paced: bool) -> np.ndarray:
-    """NoiseEstimator.add per sample (µs)."""
-    est = NoiseEstimator(joints) if compiled else NoiseEstimator(joints).python_store()
+def _us(times_ns: list[int]) -> np.ndarray:
+    """The times after the warm-up, in µs."""
+    return np.array(times_ns[WARMUP:]) / 1e3
+
+
+def timed_calls(call, joints: int, samples: int, velocities: bool, paced: bool,
+                after=None) -> np.ndarray:
+    """call(t_ns, q, qd or None) on each sample of the stream, timed (µs after the warm-up);
+    after(), if given, runs after each call, not timed."""
     clock, out = time.perf_counter_ns, []
     for t_ns, q, qd in stream(joints, samples):
         if paced:
             time.sleep(0.0009)
         t = clock()
-        est.add(t_ns, q, qd if velocities else None)
+        call(t_ns, q, qd if velocities else None)
         out.append(clock() - t)
-    return np.array(out[WARMUP:]) / 1e3
+        if after is not None:
+            after()
+    return _us(out)
+
+
+def run_noise(joints: int, samples: int, velocities: bool, compiled: bool,
+              paced: bool) -> np.ndarray:
+    """NoiseEstimator.add per sample (µs)."""
+    est = NoiseEstimator(joints) if compiled else NoiseEstimator(joints).python_store()
+    return timed_calls(est.add, joints, samples, velocities, paced)
 
 
 def run_gains(joints: int, samples: int, velocities: bool, compiled: bool,
@@ -63,7 +77,7 @@ def run_gains(joints: int, samples: int, velocities: bool, compiled: bool,
     est = make_estimator("kalman", joints)
     if not compiled:
         est.python_gains()
-    step, clock, part, whole = est._covariance_step, time.perf_counter_ns, [], []
+    step, clock, part = est._covariance_step, time.perf_counter_ns, []
 
     def timed(*args):
         t = clock()
@@ -71,14 +85,8 @@ def run_gains(joints: int, samples: int, velocities: bool, compiled: bool,
         part.append(clock() - t)
 
     est._covariance_step = timed
-    for t_ns, q, qd in stream(joints, samples):
-        if paced:
-            time.sleep(0.0009)
-        t = clock()
-        est.update(t_ns, q, qd if velocities else None)
-        whole.append(clock() - t)
-        est.learn()
-    return np.array(part[WARMUP:]) / 1e3, np.array(whole[WARMUP:]) / 1e3
+    whole = timed_calls(est.update, joints, samples, velocities, paced, after=est.learn)
+    return _us(part), whole
 
 
 def _row(*cells) -> str:

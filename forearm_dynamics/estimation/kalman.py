@@ -462,10 +462,8 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         noisiest joint's gain (a delay shortens it: the smoothed estimate is centred)."""
         i = max(range(len(self._groups)), key=lambda i: self._groups[i].r, default=None)
         m = 2 if velocity_given else 1
-        k = None if i is None else self._group_gain(i, m)
-        if k is not None and abs(self._gstate[i, Col.DT] - dt) <= 1e-3 * dt:
-            pass  # the gain in use: no Riccati solve on a node thread
-        else:
+        k = None if i is None else self._group_gain(i, m)  # the gain in use: no Riccati solve
+        if k is None or abs(self._gstate[i, Col.DT] - dt) > 1e-3 * dt:  # on a node thread
             r = float(self._r.max())
             k, _ = steady_state(dt, r, float(self._rv.max()) if velocity_given else None, self.psd)
         d = ca_model.qdd_lag(dt, k, velocity_given)

@@ -228,7 +228,7 @@ class NoiseGroups:
         changed = False
         near = abs(dt - period) <= JITTER * period
         state = self._gstate
-        for i, g in enumerate(self._groups):
+        for i in range(len(self._groups)):
             row = state[i].tolist()
             still, gdt = row[Col.STILL] != 0.0, row[Col.DT]
             if still and dt == gdt:
@@ -239,14 +239,15 @@ class NoiseGroups:
                 continue  # its gain is a step's from the steady state within JITTER: kept
             old = tuple(row[Col.P:Col.P + 6])
             m = ca_model.prior(old, dt, self.psd)
-            k, p = ca_model.measurement_update(m, g.r * g.r, g.rv * g.rv if vel else None)
+            r, rv = row[Col.R], row[Col.RV]  # the noise the compiled step reads too
+            k, p = ca_model.measurement_update(m, r * r, rv * rv if vel else None)
             if seated:  # the steady state stays: this step's gain is all that moves
                 p = old
                 still = near
             else:
                 seated_at = 0.0
                 if row[Col.SETTLING]:  # (q̇, q̈) back within SETTLED of the steady state: seated
-                    ss = ca_model.steady_posterior(period, g.r, g.rv if vel else None, self.psd)
+                    ss = ca_model.steady_posterior(period, r, rv if vel else None, self.psd)
                     if all(abs(p[i] - ss[i]) <= SETTLED * abs(ss[i]) for i in (3, 4, 5)):
                         p, seated_at = ss, period
                         state[i, Col.SETTLING] = 0.0
