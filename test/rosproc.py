@@ -143,8 +143,14 @@ class NodeProcess(Child):
         """Signal this process (only it), wait, escalate to SIGKILL if it hangs (and raise).
 
         60 s is a hang guard (the wait ends when the process does): a node took 19 s to
-        exit at load 27, and a SIGKILL after 10 s would fail a correct node."""
-        return super().stop(sig, timeout, strict=True, dump=self.argv[0].startswith(str(BIN)))
+        exit at load 27, and a SIGKILL after 10 s would fail a correct node. A hang raises Hang,
+        whose message carries the output with the stacks the node printed on SIGUSR1
+        (subprocess.TimeoutExpired's message leaves the output out: a CI run beside a second
+        suite lost the stacks of a torque_node that did not stop within 60 s of SIGINT)."""
+        try:
+            return super().stop(sig, timeout, strict=True, dump=self.argv[0].startswith(str(BIN)))
+        except subprocess.TimeoutExpired as exc:
+            raise Hang(exc.cmd, exc.timeout, output=exc.output) from None
 
 
 def start(executable: str, *ros_args: str, domain: int | None = None) -> NodeProcess:
