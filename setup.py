@@ -38,7 +38,10 @@ KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
 
 # The noise estimator's per-sample store in C (estimation/noise_step.py says why); optional
 # in the same way.
-NOISE_STEP = Extension(f"{PACKAGE}.estimation._noise_step", [f"{PACKAGE}/estimation/_noise_step.c"],
+NOISE_STEP = Extension(f"{PACKAGE}.estimation._noise_step",
+                       [f"{PACKAGE}/estimation/_noise_step.c",
+                        f"{PACKAGE}/estimation/_noise_evaluations.c"],
+                       depends=[f"{PACKAGE}/estimation/_noise_step.h"],
                        extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 # The muscle node's arithmetic around the QP in C (muscles/muscle_step.py says why); optional

@@ -9,8 +9,9 @@ performance.md). Each case feeds a 1 kHz stream with ±10 % stamp jitter (a publ
 clock), a slow movement plus 0.06° noise on every joint, positions only or with velocities,
 once compiled and once in Python (the reference each compiled part replaces); the first
 1 000 samples are discarded. Parts: `noise`, the noise estimator's add() (the compiled
-store, estimation/noise_step.py); `gains`, the noise groups' covariance step inside the
-filter's update() (the compiled Gains, estimation/noise_groups.py), with update() itself.
+store and the evaluations it makes due, estimation/noise_step.py); `gains`, the noise
+groups' covariance step inside the filter's update() (the compiled Gains,
+estimation/noise_groups.py), with update() itself.
 Prints p50 / p90 / p99 in µs. Timing is noisy on a shared machine: state `uptime` with the
 numbers.
 """

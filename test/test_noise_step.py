@@ -89,14 +89,18 @@ def test_whole_streams_give_pythons_estimates_to_the_bit(kind, rate, vel) -> Non
     z = np.sin(np.outer(t, np.arange(1, N + 1) * 0.7)) + rng.normal(0.0, 1e-3, (len(t), N))
     zd = np.cos(np.outer(t, np.arange(1, N + 1))) + rng.normal(0.0, 1e-2, (len(t), N))
     fast = NoiseEstimator(N)
-    left = []
-    store = fast._store
+    left, in_python = [], []
+    store, position = fast._store, fast._position_evaluation
     fast._store = lambda *a: left.append(a[0]) or store(*a)
+    fast._position_evaluation = lambda: in_python.append(1) or position()
     a = _run(fast, stamps, z, zd if vel else None)
     b = _run(NoiseEstimator(N).python_store(), stamps, z, zd if vel else None)
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
     assert a["counts"][0] > 0 and a["counts"][1] > 0 and (a["counts"][2] > 0) == vel
+    # the compiled store made the evaluations (Python's only on samples it left to _store)
+    assert len(in_python) <= len(left), (len(in_python), a["counts"])
+
     # left to Python: the first two samples, the one after the restart, each new rate
     new_rates = len(left) - 3
     assert new_rates == 0 if kind != "new_rate" else 1 <= new_rates <= 3, left
@@ -106,6 +110,47 @@ def test_whole_streams_give_pythons_estimates_to_the_bit(kind, rate, vel) -> Non
     strided = a["rate"][Rate.STRIDE_DT]
     assert abs(strided - step) <= NEW_RATE * step, (strided, step)
     assert a["ctr"][Ctr.STRIDE] == max(1, round(SPACING_S / strided))
+
+
+@pytest.mark.parametrize("rate", [1000.0, 100.0])
+def test_clipped_evaluations_and_repeated_stamps_the_same(rate) -> None:
+    """What the compiled evaluations do besides averaging, against Python's: a noise level
+    that rises 30 x (evaluations winsorised, then a clip run that lets the new level in),
+    repeated stamps (no difference across them), on uniform stamps (the plain differences)
+    and jittered ones (divided differences on the real times); and samples lost in bursts
+    (position windows whose blocks do not compare: skipped)."""
+    rng = np.random.default_rng(11)
+    n = 3000 if rate > 100 else 800
+    base = T0 + np.round(np.arange(n) / rate * 1e9).astype(np.int64)
+    base[n // 5::97] = base[n // 5 - 1::97][:len(base[n // 5::97])]  # a stamp repeated
+    jit = np.maximum.accumulate(base + np.where(np.arange(n) > n // 2,
+                                                rng.integers(-50_000, 50_000, n), 0))
+    skipped = []
+    keep = np.ones(n, bool)  # holes of 10-35 samples, a starved node's input
+    for start in range(n // 10, n, max(n // 12, 40)):
+        keep[start:start + int(rng.integers(10, 36))] = False
+    for stamps in (base, jit, jit[keep]):
+        n = len(stamps)
+        t = (stamps - T0) * 1e-9
+        level = np.where(np.arange(n) > 2 * n // 3, 30.0, 1.0)[:, None]
+        z = np.sin(np.outer(t, np.arange(1, N + 1))) + level * rng.normal(0.0, 1e-3, (n, N))
+        zd = np.cos(np.outer(t, np.arange(1, N + 1))) + level * rng.normal(0.0, 1e-2, (n, N))
+        fast, slow = NoiseEstimator(N), NoiseEstimator(N).python_store()
+        fast._position_evaluation = None  # the compiled store makes every evaluation
+        clipped = 0
+        for k in range(n):
+            for est in (fast, slow):
+                est.add(int(stamps[k]), z[k], zd[k])
+            np.testing.assert_array_equal(fast.ms_v, slow.ms_v)
+            np.testing.assert_array_equal(fast.ms_w, slow.ms_w)
+            np.testing.assert_array_equal(fast._nclip_v, slow._nclip_v)
+            clipped += int(fast._nclip_v.any())
+        assert list(fast._ctr) == list(slow._ctr)
+        np.testing.assert_array_equal(fast.ms, slow.ms)
+        assert clipped > 0  # the winsorising ran, and clip runs were counted
+        assert min(fast.velocity_evaluations, fast.white_evaluations, fast.evaluations) > 20
+        skipped.append(fast.irregular_windows)
+    assert skipped[-1] > 0 if rate > 100 else True  # blocks of 5 samples always compare
 
 
 def test_through_the_kalman_filter_the_same_estimates() -> None:
@@ -180,8 +225,9 @@ def test_the_store_leaves_what_it_does_not_do_and_refuses_wrong_arrays() -> None
     else:
         raise AssertionError("a doubled rate was never left to Python")
     assert list(est._ctr) == ctr and list(est._rate) == rate
-    arrays = (est._ctr, est._rate, est._raw, est._rawt, est._wring, est._wt, est._vring, est._vt)
-    params = (3.0, 0.04, 0.005, 0.02, 0.25, 2.5e-3, 8, 1000)
+    arrays = (est._ctr, est._rate, est._raw, est._rawt, est._wring, est._wt, est._vring, est._vt,
+              est.ms_w, est.ms_v, est._nclip_v, est.ms, est._nclip)
+    params = (3.0, 0.04, 0.005, 0.02, 0.25, 2.5e-3, 8, 1000, 2.0, 4.0, 3, 5, 1.25, 3.0, 4)
     names = fields(Ctr) + fields(Rate)
     with pytest.raises(RuntimeError, match="rebuild"):
         noise_step.bind(*arrays, names[::-1], params)
@@ -191,8 +237,12 @@ def test_the_store_leaves_what_it_does_not_do_and_refuses_wrong_arrays() -> None
         noise_step.Store(*arrays[:3], np.zeros(3), *arrays[4:], params)
     with pytest.raises(ValueError, match="wring"):
         noise_step.Store(*arrays[:4], np.zeros((4, N + 1)), *arrays[5:], params)
+    with pytest.raises(ValueError, match="ms_v"):
+        noise_step.Store(*arrays[:9], np.zeros(N - 1), *arrays[10:], params)
+    with pytest.raises(ValueError, match="nclip_v"):
+        noise_step.Store(*arrays[:10], np.zeros(N), *arrays[11:], params)
     with pytest.raises(ValueError, match="DENSE_STRIDE"):
-        noise_step.Store(*arrays, params[:6] + (0, 1000))
+        noise_step.Store(*arrays, params[:6] + (0,) + params[7:])
     unbound = noise_step.Store.__new__(noise_step.Store)
     with pytest.raises(RuntimeError, match="not bound"):
         unbound.store(T0, q, None)

@@ -1,48 +1,24 @@
-/* The noise estimator's per-sample store in one call (noise_step.py says why).
+/* The noise estimator's per-sample store, and the evaluations it makes due, in one call
+ * (noise_step.py says why).
  *
- * Store(ctr, rate, raw, rawt, wring, wt, vring, vt, params) binds the estimator's own arrays
- * (noise_store.py: ctr int64 and rate float64, indexed as FIELDS lists them, raw (2 cap, n),
- * rawt (2 cap,), wring (4, n), wt (4,), vring (3, n), vt (3,), all C-contiguous and writable;
- * they must outlive the Store, which holds a buffer of each) and noise_store.py's constants,
- * params = (GAP_PERIODS, GAP_MIN_S, RATE_ALPHA, NOMINAL_TOL, NEW_RATE, DENSE_PERIOD_S,
- * DENSE_STRIDE, SAME_NS).
- *   store(t_ns, q, qd_or_None) -> the evaluations due (1 white, 2 position, 4 velocity), as
- *       SampleRings._store returns them, having done what it does: the rate, the
- *       counters, the rings. It returns -1 (NOT_STORED) with nothing written for what it
- *       leaves to _store: no stamp before this one (a first sample, a restart), no period
- *       yet, a new rate (the ring is reallocated), a ring bound for another stride.
- * Built with -ffp-contract=off: the rate's products and sums rounded as Python rounds them.
+ * Store(ctr, rate, raw, rawt, wring, wt, vring, vt, ms_w, ms_v, nclip_v, ms, nclip, params)
+ * binds the estimator's own arrays (noise_store.py: ctr int64 and rate float64, indexed as
+ * FIELDS lists them, raw (2 cap, n), rawt (2 cap,), wring (4, n), wt (4,), vring (3, n),
+ * vt (3,); noise.py: ms_w, ms_v, ms (n,) float64, nclip_v, nclip (n,) int64; all
+ * C-contiguous and writable; they must outlive the Store, which holds a buffer of each) and
+ * the constants, params = (GAP_PERIODS, GAP_MIN_S, RATE_ALPHA, NOMINAL_TOL, NEW_RATE,
+ * DENSE_PERIOD_S, DENSE_STRIDE, SAME_NS, TAU_S, CLIP_SIGMAS, CLIP_RUN, MIN_EVALUATIONS,
+ * WINDOW_STRETCH, BLOCK_SPREAD_RATIO, MIN_BLOCK).
+ *   store(t_ns, q, qd_or_None) -> the evaluations left due (2: a position evaluation it
+ *       leaves to noise.py; else 0), having done what SampleRings._store does (the rate,
+ *       the counters, the rings) and the evaluations it made due (_noise_evaluations.c).
+ *       It returns -1 (NOT_STORED) with nothing written for what it leaves to _store: no
+ *       stamp before this one (a first sample, a restart), no period yet, a new rate (the
+ *       ring is reallocated), a ring bound for another stride.
+ * Built with -ffp-contract=off: every product and sum rounded as Python and numpy round them.
  */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
-#include <math.h>
-#include <stdint.h>
-#include <string.h>
+#include "_noise_step.h"
 
-/* noise_store.Ctr, then noise_store.Rate, in their order (noise_step.bind compares FIELDS) */
-enum { STARTED, ORIGIN, HAS_LAST, LAST_NS, LAST_D, SAME, COUNT, WCOUNT, VCOUNT, CAP, STRIDE,
-       EVERY, N_CTR };
-enum { DT, DT_AVG, STRIDE_DT, N_RATE };
-#define FIELDS \
-    "STARTED ORIGIN HAS_LAST LAST_NS LAST_D SAME COUNT WCOUNT VCOUNT CAP STRIDE EVERY " \
-    "DT DT_AVG STRIDE_DT"
-#define NOT_STORED (-1)
-#define N_BUFS 8
-
-typedef struct {
-    PyObject_HEAD
-    Py_buffer bufs[N_BUFS]; /* ctr, rate, raw, rawt, wring, wt, vring, vt */
-    int held; /* how many of bufs are held */
-    Py_ssize_t n;
-    double gap_periods, gap_min_s, rate_alpha, nominal_tol, new_rate, dense_period_s;
-    long long dense_stride, same_ns;
-} Store;
-
-/* Python's a % b for b > 0 (never negative) */
-static long long pymod(long long a, long long b) {
-    const long long m = a % b;
-    return m < 0 ? m + b : m;
-}
 
 static int get_vector(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *what) {
     if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
@@ -63,23 +39,29 @@ static void release_all(Store *self) {
 
 static void Store_dealloc(Store *self) {
     release_all(self);
+    PyMem_Free(self->z);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
 static int Store_init(Store *self, PyObject *args, PyObject *kwds) {
     PyObject *arr[N_BUFS];
     static char *names[] = {"ctr", "rate", "raw", "rawt", "wring", "wt", "vring", "vt",
-                            "params", NULL};
-    /* rows of a 2-d array (-1: twice the ring, 2 CAP), 0: a vector; lengths of vectors */
-    static const int rows[] = {0, 0, -1, 0, 4, 0, 3, 0};
+                            "ms_w", "ms_v", "nclip_v", "ms", "nclip", "params", NULL};
+    /* rows of a 2-d array (-1: twice the ring, 2 CAP), 0: the times of the ring before it,
+       -2: a joint vector (n,) */
+    static const int rows[] = {0, 0, -1, 0, 4, 0, 3, 0, -2, -2, -2, -2, -2};
     PyObject *params;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OOOOOOOOO", names, &arr[0], &arr[1], &arr[2],
-                                     &arr[3], &arr[4], &arr[5], &arr[6], &arr[7], &params))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OOOOOOOOOOOOOO", names, &arr[0], &arr[1],
+                                     &arr[2], &arr[3], &arr[4], &arr[5], &arr[6], &arr[7],
+                                     &arr[8], &arr[9], &arr[10], &arr[11], &arr[12], &params))
         return -1;
     release_all(self);
-    if (!PyArg_ParseTuple(params, "ddddddLL", &self->gap_periods, &self->gap_min_s,
+    if (!PyArg_ParseTuple(params, "ddddddLLddLLddL", &self->gap_periods, &self->gap_min_s,
                           &self->rate_alpha, &self->nominal_tol, &self->new_rate,
-                          &self->dense_period_s, &self->dense_stride, &self->same_ns))
+                          &self->dense_period_s, &self->dense_stride, &self->same_ns,
+                          &self->tau_s, &self->clip_sigmas, &self->clip_run,
+                          &self->min_evaluations, &self->window_stretch,
+                          &self->block_spread_ratio, &self->min_block))
         return -1;
     if (self->dense_stride < 1) {
         PyErr_SetString(PyExc_ValueError, "params: DENSE_STRIDE must be at least 1");
@@ -91,14 +73,16 @@ static int Store_init(Store *self, PyObject *args, PyObject *kwds) {
         if (PyObject_GetBuffer(arr[i], v, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0)
             return -1;
         self->held++;
-        const char *fmt = i == 0 ? "l" : "d";
-        int ok = v->format != NULL && (strcmp(v->format, fmt) == 0
-                                       || (i == 0 && strcmp(v->format, "q") == 0))
+        const int ints = i == B_CTR || i == B_NCLIPV || i == B_NCLIP;
+        int ok = v->format != NULL && (strcmp(v->format, ints ? "l" : "d") == 0
+                                       || (ints && strcmp(v->format, "q") == 0))
                  && v->itemsize == 8;
-        if (ok && i == 0)
+        if (ok && i == B_CTR)
             ok = v->ndim == 1 && v->shape[0] == N_CTR;
-        else if (ok && i == 1)
+        else if (ok && i == B_RATE)
             ok = v->ndim == 1 && v->shape[0] == N_RATE;
+        else if (ok && rows[i] == -2)
+            ok = v->ndim == 1 && v->shape[0] == self->n;
         else if (ok && rows[i]) {
             if (self->n < 0 && v->ndim == 2)
                 self->n = v->shape[1];
@@ -110,12 +94,20 @@ static int Store_init(Store *self, PyObject *args, PyObject *kwds) {
         if (!ok) {
             PyErr_Format(PyExc_ValueError,
                          "%s: a writable contiguous %s array of noise_store.py's shape",
-                         names[i], i == 0 ? "int64" : "float64");
+                         names[i], ints ? "int64" : "float64");
             return -1;
         }
     }
+    PyMem_Free(self->z);
+    const size_t cap = (size_t)self->bufs[B_RAW].shape[0] / 2;
+    self->z = PyMem_Malloc(((size_t)(BLOCKS + 1) * (size_t)self->n + cap + 1) * sizeof(double));
+    if (self->z == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
     return 0;
 }
+
 
 static PyObject *Store_store(Store *self, PyObject *const *args, Py_ssize_t nargs) {
     if (self->held != N_BUFS) {
@@ -130,9 +122,9 @@ static PyObject *Store_store(Store *self, PyObject *const *args, Py_ssize_t narg
     if (t_ns == -1 && PyErr_Occurred())
         return NULL;
     const Py_ssize_t n = self->n;
-    int64_t *c = self->bufs[0].buf;
-    double *r = self->bufs[1].buf;
-    const Py_ssize_t ring = self->bufs[2].shape[0] / 2;
+    int64_t *c = self->bufs[B_CTR].buf;
+    double *r = self->bufs[B_RATE].buf;
+    const Py_ssize_t ring = self->bufs[B_RAW].shape[0] / 2;
     if (!c[STARTED] || !c[HAS_LAST] || r[DT] == 0.0 || c[CAP] != ring || ring == 0)
         return PyLong_FromLong(NOT_STORED);
     Py_buffer qb, qdb;
@@ -177,8 +169,8 @@ static PyObject *Store_store(Store *self, PyObject *const *args, Py_ssize_t narg
     Py_ssize_t h = (Py_ssize_t)(k % 4);
     c[WCOUNT] = ++k;
     if (pymod(-k, dense) < 4) {
-        memcpy((double *)self->bufs[4].buf + h * n, qb.buf, row);
-        ((double *)self->bufs[5].buf)[h] = t_s;
+        memcpy((double *)self->bufs[B_WRING].buf + h * n, qb.buf, row);
+        ((double *)self->bufs[B_WT].buf)[h] = t_s;
         if (k % dense == 0 && k >= 4)
             due |= 1;
     }
@@ -186,7 +178,7 @@ static PyObject *Store_store(Store *self, PyObject *const *args, Py_ssize_t narg
     const long long cap = c[CAP];
     k = c[COUNT];
     h = (Py_ssize_t)(k % cap);
-    double *raw = self->bufs[2].buf, *rawt = self->bufs[3].buf;
+    double *raw = self->bufs[B_RAW].buf, *rawt = self->bufs[B_RAWT].buf;
     memcpy(raw + h * n, qb.buf, row);
     memcpy(raw + (h + cap) * n, qb.buf, row);
     rawt[h] = rawt[h + cap] = t_s;
@@ -199,26 +191,35 @@ static PyObject *Store_store(Store *self, PyObject *const *args, Py_ssize_t narg
         k = ++c[VCOUNT];
         if (pymod(-k, dense) < 3) {
             h = (Py_ssize_t)(k % 3);
-            memcpy((double *)self->bufs[6].buf + h * n, qdb.buf, row);
-            ((double *)self->bufs[7].buf)[h] = t_s;
+            memcpy((double *)self->bufs[B_VRING].buf + h * n, qdb.buf, row);
+            ((double *)self->bufs[B_VT].buf)[h] = t_s;
             if (k >= 3 && k % dense == 0)
                 due |= 4;
         }
         PyBuffer_Release(&qdb);
     }
-    return PyLong_FromLong(due);
+    /* the evaluations, in noise.py's order (they read and write apart); a position one this
+       cannot do is left due, to noise.py */
+    if (due & 1)
+        white_evaluation(self, c, r, dense);
+    if ((due & 2) && position_evaluation(self, c, r) == 0)
+        due &= ~2L;
+    if (due & 4)
+        velocity_evaluation(self, c, dense);
+    return PyLong_FromLong(due & 2);
 }
 
 static PyMethodDef Store_methods[] = {
     {"store", (PyCFunction)(void (*)(void))Store_store, METH_FASTCALL,
-     "the sample into the rings; returns the evaluations due, or -1 (left to _store)"},
+     "the sample into the rings, and its white and velocity evaluations; returns the position "
+     "evaluation due (2) or 0, or -1 (left to _store)"},
     {NULL, NULL, 0, NULL},
 };
 
 static PyTypeObject StoreType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "forearm_dynamics.estimation._noise_step.Store",
-    .tp_doc = "The noise estimator's per-sample store, bound to its arrays.",
+    .tp_doc = "The noise estimator's per-sample store and evaluations, bound to its arrays.",
     .tp_basicsize = sizeof(Store),
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_new = PyType_GenericNew,

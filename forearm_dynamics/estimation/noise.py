@@ -104,6 +104,15 @@ def divided_difference_weights(t: list[float]) -> tuple[list[float], float]:
     return w, sum(x * x for x in w)
 
 
+def _weighted_rows(w: list[float], rows: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> None:
+    """out = sum_i w[i] rows[i], summed in order: the compiled store's arithmetic to the bit
+    (np.dot hands it to BLAS, whose order and fused multiply-adds depend on the CPU)."""
+    np.multiply(rows[0], w[0], out=out)
+    for i in range(1, len(w)):
+        np.multiply(rows[i], w[i], out=tmp)
+        out += tmp
+
+
 class NoiseEstimator(SampleRings):
     """Per-joint position (and velocity) noise std, updated sample by sample.
 
@@ -111,34 +120,57 @@ class NoiseEstimator(SampleRings):
     of the current estimates (rad, rad/s), `ready` / `velocity_ready` whether they have
     enough evaluations; `restart()` after a gap or a re-initialised filter.
 
-    A sample is stored (the rings, the rate, the counters: noise_store.SampleRings) by one
-    compiled call where noise_step.py's extension is built; the evaluations it makes due
-    run here.
+    A sample is stored (the rings, the rate, the counters: noise_store.SampleRings), and
+    the evaluations it makes due are made, by one compiled call where noise_step.py's
+    extension is built; the evaluations here are its reference, and run for the samples it
+    leaves to Python (the first steps, a new rate).
     """
 
     def __init__(self, n: int):
-        super().__init__(n, SPACING_S, EVERY_S, ORDER + 1)
+        # what the compiled store's evaluations write (bound by SampleRings.__init__)
         self.ms = np.zeros(n)  # mean square, position
-        self.ms_v = np.zeros(n)
-        self.evaluations = 0
-        self.irregular_windows = 0  # evaluations skipped: blocks not comparable (bursty loss)
-        self.white_evaluations = 0
+        self.ms_v = np.zeros(n)  # mean square, velocity
         self.ms_w = np.zeros(n)  # mean square of the third difference / 20: the white level
-        self._d3 = [np.roll([-1.0, 3.0, -3.0, 1.0], h + 1) for h in range(4)]  # newest at h
-        self._nclip = np.zeros(n, np.int64)
+        self._nclip = np.zeros(n, np.int64)  # evaluations clipped in a row, position
         self._nclip_v = np.zeros(n, np.int64)
+        super().__init__(n, SPACING_S, EVERY_S, ORDER + 1)
+        self._d3 = [np.roll([-1.0, 3.0, -3.0, 1.0], h + 1).tolist() for h in range(4)]  # newest at h
         self._over = np.zeros(n, bool)
-        self.velocity_evaluations = 0
         self._sums = np.zeros((ORDER + 1, n))  # the blocks' sums, oldest first
         self._z = np.zeros(n)
         self._tmp = np.zeros(n)
-        self._w = np.zeros(ORDER + 1)
-        self._uniform: tuple[int, np.ndarray, float] | None = None
+        # the uniform stamps' weights, for their (step ns, stride): ((last_d, s), w, sum w^2)
+        self._uniform: tuple[tuple[int, int], list[float], float] | None = None
+
+    def _evaluated(self) -> tuple[tuple[np.ndarray, ...], tuple]:
+        return ((self.ms_w, self.ms_v, self._nclip_v, self.ms, self._nclip),
+                (TAU_S, CLIP_SIGMAS, CLIP_RUN, MIN_EVALUATIONS, WINDOW_STRETCH,
+                 BLOCK_SPREAD_RATIO, MIN_BLOCK))
+
+    @property
+    def evaluations(self) -> int:
+        """Position evaluations made."""
+        return self._ctr[Ctr.PEVALS]
+
+    @property
+    def irregular_windows(self) -> int:
+        """Position evaluations skipped: a jittered window's blocks do not compare (bursty
+        loss; module docstring)."""
+        return self._ctr[Ctr.IRREGULAR]
+
+    @property
+    def white_evaluations(self) -> int:
+        return self._ctr[Ctr.WEVALS]
+
+    @property
+    def velocity_evaluations(self) -> int:
+        return self._ctr[Ctr.VEVALS]
 
     # -- samples -------------------------------------------------------------------------
     def add(self, t_ns: int, q: np.ndarray, qd: np.ndarray | None) -> None:
         """The sample at t_ns (positions, and velocities or None): stored (noise_store.py),
-        then the evaluations it makes due."""
+        then the evaluations it makes due (the compiled store makes them itself, the same
+        arithmetic: _noise_evaluations.c, and returns none due)."""
         due = self.store(t_ns, q, qd)
         if due:
             if due & WHITE_DUE:
@@ -159,27 +191,25 @@ class NoiseEstimator(SampleRings):
         last_d = ctr[Ctr.LAST_D]
         if ctr[Ctr.SAME] > cap:  # uniform stamps over the window: the weights of that spacing
             u = self._uniform
-            if u is None or u[0] != last_d:
+            if u is None or u[0] != (last_d, s):
                 span = [(i - ORDER) * s * last_d * 1e-9 for i in range(ORDER + 1)]
                 w, sw = divided_difference_weights(span)
-                u = self._uniform = (last_d, np.array(w), sw)
+                u = self._uniform = ((last_d, s), w, sw)
             _, w, sw = u
         else:  # jittered: the weights of the blocks' mean times, if the blocks compare
             tw = self._rawt[window].reshape(ORDER + 1, s)
             if not self._comparable(tw):
-                self.irregular_windows += 1
+                ctr[Ctr.IRREGULAR] += 1
                 return
-            wl, sw = divided_difference_weights(tw.mean(axis=1).tolist())
-            w = self._w
-            w[:] = wl
+            w, sw = divided_difference_weights(tw.mean(axis=1).tolist())
         sums = self._sums
         np.sum(self._raw[window].reshape(ORDER + 1, s, self.n), axis=1, out=sums)
         z = self._z
-        np.dot(w, sums, out=z)  # s x the divided difference of the block means
+        _weighted_rows(w, sums, z, self._tmp)  # s x the divided difference of the block means
         z *= z
         z *= 1.0 / (s * sw)  # a block mean of s white samples has variance r^2 / s
-        self.evaluations += 1
-        self._accumulate(self.ms, z, self.evaluations, ctr[Ctr.EVERY] * self.period_s)
+        ctr[Ctr.PEVALS] += 1
+        self._accumulate(self.ms, z, ctr[Ctr.PEVALS], ctr[Ctr.EVERY] * self.period_s)
 
     def _comparable(self, tw: np.ndarray) -> bool:
         """Whether a jittered window's six blocks (their stamps, (6, s)) measure what the
@@ -208,7 +238,7 @@ class NoiseEstimator(SampleRings):
         h = (ctr[Ctr.WCOUNT] - 1) % 4
         z = self._z
         if ctr[Ctr.SAME] >= 3:  # the last three steps equal (to 1 us): the plain difference
-            np.dot(self._d3[h], self._wring, out=z)
+            _weighted_rows(self._d3[h], self._wring, z, self._tmp)
             z *= z
             z *= 1.0 / 20.0
         else:
@@ -216,12 +246,12 @@ class NoiseEstimator(SampleRings):
                 wl, sw = divided_difference_weights(self._wt.tolist())
             except ZeroDivisionError:  # a repeated stamp: no difference across it
                 return
-            np.dot(np.array(wl), self._wring, out=z)
+            _weighted_rows(wl, self._wring, z, self._tmp)
             z *= z
             z *= 1.0 / sw
-        self.white_evaluations += 1
+        ctr[Ctr.WEVALS] += 1
         dt = self.period_s
-        a = min(1.0, max(1.0 / self.white_evaluations, dense_stride(dt) * dt / TAU_S))
+        a = min(1.0, max(1.0 / ctr[Ctr.WEVALS], dense_stride(dt) * dt / TAU_S))
         z -= self.ms_w
         z *= a
         self.ms_w += z
@@ -241,9 +271,10 @@ class NoiseEstimator(SampleRings):
         np.subtract(v0, v1, out=z)
         z -= tmp
         z *= z
-        z *= 1.0 / (1.0 + (1.0 + rho) ** 2 + rho * rho)
-        self.velocity_evaluations += 1
-        self._accumulate(self.ms_v, z, self.velocity_evaluations,
+        u = 1.0 + rho
+        z *= 1.0 / (1.0 + u * u + rho * rho)
+        self._ctr[Ctr.VEVALS] += 1
+        self._accumulate(self.ms_v, z, self._ctr[Ctr.VEVALS],
                          dense_stride(self.period_s) * (t0 - t1))
 
     def _accumulate(self, ms: np.ndarray, sq: np.ndarray, k: int, step_s: float) -> None:

@@ -2,7 +2,8 @@
 
 Why a module of its own: storing a sample is the per-sample half of the estimator and the
 half that is compiled (noise_step.py: one C call, the same arrays); the evaluations, one
-sample in ~4 at 1 kHz, read what is stored here and stay in noise.py. The counters and the
+sample in ~4 at 1 kHz, read what is stored here and are noise.py's (the compiled call makes
+them too, on noise.py's arrays: `_evaluated`). The counters and the
 rate live in two small arrays (`_ctr`: Ctr, `_rate`: Rate) so that the compiled store and
 `_store`, its Python reference, move the same state. They are array.array, not numpy: the
 filter reads period_s on every sample, and an array.array's element is a Python float at a
@@ -77,6 +78,10 @@ class Ctr:
     CAP = 9  # the position ring's samples (blocks x STRIDE; 0 before the first step)
     STRIDE = 10  # samples per block
     EVERY = 11  # samples between position evaluations
+    WEVALS = 12  # white evaluations made (noise.py's; the compiled store makes them too)
+    VEVALS = 13  # velocity evaluations made
+    PEVALS = 14  # position evaluations made
+    IRREGULAR = 15  # position evaluations skipped: a jittered window's blocks do not compare
 
 
 class Rate:
@@ -127,11 +132,19 @@ class SampleRings(BindsCompiled):
         """The compiled store on this estimator's arrays (noise_step.py; None: Python's way)."""
         if not self._compiled:
             return
+        arrays, constants = self._evaluated()
         self._fast = noise_step.bind(self._ctr, self._rate, self._raw, self._rawt, self._wring,
-                                     self._wt, self._vring, self._vt,
+                                     self._wt, self._vring, self._vt, *arrays,
                                      fields(Ctr) + fields(Rate),
                                      (GAP_PERIODS, GAP_MIN_S, RATE_ALPHA, NOMINAL_TOL, NEW_RATE,
-                                      DENSE_PERIOD_S, DENSE_STRIDE, SAME_NS))
+                                      DENSE_PERIOD_S, DENSE_STRIDE, SAME_NS, *constants))
+
+    def _evaluated(self) -> tuple[tuple[np.ndarray, ...], tuple]:
+        """What the compiled store's evaluations write, and their constants: the estimator's
+        (noise.NoiseEstimator: the white, velocity and position mean squares and the clip
+        runs; TAU_S, CLIP_SIGMAS, CLIP_RUN, MIN_EVALUATIONS, WINDOW_STRETCH,
+        BLOCK_SPREAD_RATIO, MIN_BLOCK)."""
+        raise NotImplementedError
 
     # -- configuration -------------------------------------------------------------------
     def _configure(self, dt: float) -> None:
