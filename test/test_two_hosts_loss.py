@@ -52,6 +52,8 @@ def _why_failed(r: dict) -> str:
             f"node: {r['node_log_tail']}")
 
 
+#: samples a lossy best-effort link may drop before the first answer (test_loss_case)
+FIRST_DROPS_BEST_EFFORT = 2
 #: the readers of a reliable case at FIFO 50 (see the module docstring); root runs this tier
 REALTIME = ("-p", "realtime_priority:=50")
 
@@ -70,7 +72,13 @@ def test_loss_case(case: Case, tmp_path):
     # the publisher sent its samples (a tick later than 0.5 s skips some: then fewer) and B's
     # own recording holds every one: the count every loss below is measured against
     assert 0.9 * SAMPLES <= r["sent"] <= SAMPLES and r["inputs_recorded"] == r["sent"], why
-    assert r["missing_before_first_answer"] == 0, why  # the hosts found each other first
+    # the hosts found each other first: no sample lost to discovery (a race loses the first
+    # tens to hundreds of samples at 1 kHz). A best-effort case's link drops each sample with
+    # probability loss %, the first ones too (CI, best_effort_1: the first of 15 000 dropped,
+    # the second answered; benchmarks/two_hosts.json has one such run): up to
+    # FIRST_DROPS_BEST_EFFORT of them in a row are the link's (three in a row: 1.25e-4 at 5 %)
+    allowed = FIRST_DROPS_BEST_EFFORT if case.best_effort and case.loss else 0
+    assert r["missing_before_first_answer"] <= allowed, why
     # B's recording holds an answer for every sample the node processed before it stopped
     # (the last answers' repairs waited for, not a fixed grace: two_host_run._drain)
     assert r["drained"], why
