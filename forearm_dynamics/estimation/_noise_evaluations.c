@@ -5,6 +5,33 @@
  * (noise._weighted_rows). Built with -ffp-contract=off, as _noise_step.c. */
 #include "_noise_step.h"
 
+/* noise.py's divided_difference_weights on m times; 0 for a repeated time (Python's
+   ZeroDivisionError: no difference across it) */
+static int weights(const double *t, int m, double *w, double *sw) {
+    for (int i = 0; i < m; i++) {
+        double p = 1.0;
+        for (int j = 0; j < m; j++)
+            if (j != i)
+                p *= t[i] - t[j];
+        if (p == 0.0)
+            return 0;
+        w[i] = 1.0 / p;
+    }
+    double s = 0.0;
+    for (int i = 0; i < m; i++)
+        s += w[i] * w[i];
+    *sw = s;
+    return 1;
+}
+
+/* noise._weighted_rows for joint j: sum_i w[i] rows[i][j] over m rows of n, in order */
+static double weighted(const double *w, int m, const double *rows, Py_ssize_t n, Py_ssize_t j) {
+    double z = w[0] * rows[j];
+    for (int i = 1; i < m; i++)
+        z += w[i] * rows[i * n + j];
+    return z;
+}
+
 /* noise.py's _white_evaluation: the third (divided) difference of the white window. */
 void white_evaluation(Store *self, int64_t *c, const double *r, long long dense) {
     static const double d3[4] = {-1.0, 3.0, -3.0, 1.0};
@@ -17,28 +44,17 @@ void white_evaluation(Store *self, int64_t *c, const double *r, long long dense)
         for (int i = 0; i < 4; i++)
             w[i] = d3[pymod(i - shift, 4)];
         scale = 1.0 / 20.0;
-    } else { /* divided_difference_weights(t): none across a repeated stamp */
-        double sw = 0.0;
-        for (int i = 0; i < 4; i++) {
-            double p = 1.0;
-            for (int j = 0; j < 4; j++)
-                if (j != i)
-                    p *= t[i] - t[j];
-            if (p == 0.0)
-                return;
-            w[i] = 1.0 / p;
-        }
-        for (int i = 0; i < 4; i++)
-            sw += w[i] * w[i];
+    } else { /* the divided difference on the real times: none across a repeated stamp */
+        double sw;
+        if (!weights(t, 4, w, &sw))
+            return;
         scale = 1.0 / sw;
     }
     const long long k = ++c[WEVALS];
     const double dt = r[DT];
     const double a = fmin(1.0, fmax(1.0 / (double)k, (double)dense * dt / self->tau_s));
     for (Py_ssize_t j = 0; j < n; j++) {
-        double z = w[0] * ring[j];
-        for (int i = 1; i < 4; i++)
-            z += w[i] * ring[i * n + j];
+        double z = weighted(w, 4, ring, n, j);
         z *= z;
         z *= scale;
         z -= ms[j];
@@ -125,25 +141,6 @@ static double pairwise_sum(const double *a, Py_ssize_t n) {
     return pairwise_sum(a, n2) + pairwise_sum(a + n2, n - n2);
 }
 
-/* noise.py's divided_difference_weights on BLOCKS times; 0 for a repeated time (Python's
-   ZeroDivisionError: the caller leaves the evaluation to Python) */
-static int weights(const double *t, double *w, double *sw) {
-    for (int i = 0; i < BLOCKS; i++) {
-        double p = 1.0;
-        for (int j = 0; j < BLOCKS; j++)
-            if (j != i)
-                p *= t[i] - t[j];
-        if (p == 0.0)
-            return 0;
-        w[i] = 1.0 / p;
-    }
-    double s = 0.0;
-    for (int i = 0; i < BLOCKS; i++)
-        s += w[i] * w[i];
-    *sw = s;
-    return 1;
-}
-
 /* noise.py's _position_evaluation (and _comparable): the fifth divided difference of the
    block means. Returns 0 having done it (or skipped an irregular window, as Python does),
    1 to leave it to Python (a ring of other than BLOCKS blocks, repeated times). */
@@ -161,7 +158,7 @@ int position_evaluation(Store *self, int64_t *c, const double *r) {
         double span[BLOCKS];
         for (int i = 0; i < BLOCKS; i++)
             span[i] = (double)((i - (BLOCKS - 1)) * s * c[LAST_D]) * 1e-9;
-        if (!weights(span, w, &sw))
+        if (!weights(span, BLOCKS, w, &sw))
             return 1;
     } else { /* jittered: the weights of the blocks' mean times, if the blocks compare */
         double tm[BLOCKS];
@@ -172,8 +169,8 @@ int position_evaluation(Store *self, int64_t *c, const double *r) {
             int ok = !(span > self->window_stretch * (double)(cap - 1) * r[DT]);
             if (ok) {
                 double lo = INFINITY, hi = -INFINITY;
+                double *d = sums + BLOCKS * n; /* a block's squared deviations */
                 for (int b = 0; b < BLOCKS; b++) {
-                    double *d = sums + BLOCKS * n; /* the block's squared deviations */
                     for (long long i = 0; i < s; i++) {
                         const double e = tw[b * s + i] - tm[b];
                         d[i] = e * e;
@@ -189,7 +186,7 @@ int position_evaluation(Store *self, int64_t *c, const double *r) {
                 return 0;
             }
         }
-        if (!weights(tm, w, &sw))
+        if (!weights(tm, BLOCKS, w, &sw))
             return 1;
     }
     /* the blocks' sums (summed in order, as numpy sums a middle axis), weighted in order */
@@ -203,9 +200,7 @@ int position_evaluation(Store *self, int64_t *c, const double *r) {
     }
     const double scale = 1.0 / ((double)s * sw);
     for (Py_ssize_t j = 0; j < n; j++) {
-        double v = w[0] * sums[j];
-        for (int b = 1; b < BLOCKS; b++)
-            v += w[b] * sums[b * n + j];
+        double v = weighted(w, BLOCKS, sums, n, j);
         v *= v;
         z[j] = v * scale;
     }

@@ -3,9 +3,9 @@
 Why a module of its own: storing a sample is the per-sample half of the estimator and the
 half that is compiled (noise_step.py: one C call, the same arrays); the evaluations, one
 sample in ~4 at 1 kHz, read what is stored here and are noise.py's (the compiled call makes
-them too, on noise.py's arrays: `_evaluated`). The counters and the
-rate live in two small arrays (`_ctr`: Ctr, `_rate`: Rate) so that the compiled store and
-`_store`, its Python reference, move the same state. They are array.array, not numpy: the
+them too, on noise.py's arrays: `_evaluated`). The counters and the rate live in two small
+arrays (`_ctr`: Ctr, `_rate`: Rate) so that the compiled store and `_store`, its Python
+reference, move the same state. They are array.array, not numpy: the
 filter reads period_s on every sample, and an array.array's element is a Python float at a
 list's cost, where a numpy element is a scalar conversion (µs on a node's cold caches: the
 filter's update() p50 went 20 -> 25 µs in the node with numpy's). `_store` also does what the
