@@ -29,11 +29,14 @@ EXECUTABLES = {
     "bag_muscles": "forearm_dynamics.cli.bag_muscles:main",
 }
 
-# The Kalman filter's per-sample arithmetic in C (estimation/kalman_step.py says why);
+# The Kalman filter's per-sample arithmetic in C (estimation/kalman_step.py says why), and its
+# practice filter's (estimation/practice_step.py);
 # optional: without a C compiler the install goes on and the filter runs numpy's way.
 # -ffp-contract=off: no fused multiply-add, every product and sum rounded as numpy rounds it.
 KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
-                        [f"{PACKAGE}/estimation/_kalman_step.c"],
+                        [f"{PACKAGE}/estimation/_kalman_step.c",
+                         f"{PACKAGE}/estimation/_practice_step.c"],
+                        depends=[f"{PACKAGE}/estimation/_practice_step.h"],
                         extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 # The noise estimator's per-sample store in C (estimation/noise_step.py says why); optional

@@ -19,8 +19,8 @@
  * Built with -ffp-contract=off: no fused multiply-add, each product and sum rounded as the
  * numpy path rounds it (test_kalman_step.py compares the two; test_group_step.py the gains).
  */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
+#include "_practice_step.h" /* Practice: the practice filter's step, registered below */
+
 #include <math.h>
 #include <string.h>
 
@@ -377,7 +377,8 @@ static struct PyModuleDef module = {
 };
 
 PyMODINIT_FUNC PyInit__kalman_step(void) {
-    if (PyType_Ready(&StepType) < 0 || PyType_Ready(&GainsType) < 0)
+    if (PyType_Ready(&StepType) < 0 || PyType_Ready(&GainsType) < 0
+        || PyType_Ready(&PracticeType) < 0)
         return NULL;
     PyObject *m = PyModule_Create(&module);
     if (m == NULL)
@@ -391,6 +392,12 @@ PyMODINIT_FUNC PyInit__kalman_step(void) {
     Py_INCREF(&GainsType);
     if (PyModule_AddObject(m, "Gains", (PyObject *)&GainsType) < 0) {
         Py_DECREF(&GainsType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    Py_INCREF(&PracticeType);
+    if (PyModule_AddObject(m, "Practice", (PyObject *)&PracticeType) < 0) {
+        Py_DECREF(&PracticeType);
         Py_DECREF(m);
         return NULL;
     }

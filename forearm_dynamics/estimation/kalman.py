@@ -216,7 +216,9 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         self._pf_w = np.zeros(n)  # their share of the blend in q̈, faded in and out
         self._pf_target = np.zeros(n)  # ... towards this (practice_filter on the rule's joints)
         self._pf_d = np.zeros(n)
-        self._pf_fading = False
+        self._pstep = None  # the compiled step (practice_output._practice_compiled)
+        self._pcompiled = True
+        self._pstep_key: tuple | None = None
         lag_band = v["delay_practice_hz"]
         on = lag_band > 0.0 and self.delay_s >= practice_lag.MIN_DELAY_S
         self._plag = PracticeLag(n, lag_band) if on else None
@@ -231,7 +233,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         self._bind()
         self.reset()
 
-    COMPILED = ("_fast", "_gfast")  # BindsCompiled: copies and pickles bind their own
+    COMPILED = ("_fast", "_gfast", "_pstep")  # BindsCompiled: copies and pickles bind their own
 
     def _bind(self) -> None:
         """Predict, innovations, correction and the copies after it as two compiled calls on
@@ -240,6 +242,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         self._fast = kalman_step.bind(self._X, self._T3, self._E, self._Kp, self._Kv, self._out,
                                       self._pend_q, self._pend_qd)
         self._bind_gains()
+        self._pstep_key = None  # the practice filter's: at its next use (practice_output.py)
 
     def __setstate__(self, state: dict) -> None:
         super().__setstate__(state)  # BindsCompiled: its own compiled step
@@ -320,7 +323,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
             self._start(t_ns, q, qd)
             self.noise_estimator.add(t_ns, q, qd)
             if self._pfir is not None and qd is None:
-                self._pfir.push(t_ns, q)
+                self._practice_push(t_ns, q)
                 self._pf_q = q
             return self._output(t_ns, False, vel)
         dt = (t_ns - self._t_ns) * 1e-9
@@ -405,7 +408,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
             if not self._pfir.K:  # the first step's period until the nominal is known
                 self._pfir.configure(dt)
                 self._pblend.configure(dt)
-            self._pfir.push(t_ns, qin)
+            self._practice_push(t_ns, qin)
             self._pf_q = qin
         if not defer:
             self.noise_estimator.add(t_ns, qin, qd)

@@ -101,18 +101,22 @@ class PracticeWindow:
         self._q = np.zeros((2 * (2 * h + 1), n))
         self._x = np.zeros((h + 1, 2, n))
         self.ref = np.zeros(kernels.shape[:-1] + (n,))  # the practice of the sample h back
-        self.count = 0
+        self._c = np.zeros(1, np.int64)  # samples pushed since the last restart
+
+    @property
+    def count(self) -> int:
+        return int(self._c[0])
 
     def restart(self) -> None:
         """No kernel spans this point (a gap, a restarted filter)."""
-        self.count = 0
+        self._c[0] = 0
 
     def push(self, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
         """The sample's positions and two causal estimates for it. Every `every` samples once
         the window is full: the (2, n) estimates stored for the sample h back, whose practice
         is then in `ref`; else None."""
         h = self.h
-        c = self.count
+        c = int(self._c[0])
         w = 2 * h + 1
         j = c % w
         self._q[j] = q  # twice: the window is always one contiguous slice
@@ -120,7 +124,7 @@ class PracticeWindow:
         xs = self._x[c % (h + 1)]
         xs[0] = a
         xs[1] = b
-        self.count = c = c + 1
+        self._c[0] = c = c + 1
         if c < w or c % self.every:
             return None
         start = c % w  # the window's oldest sample
@@ -142,7 +146,7 @@ class PracticeBlend:
         self._t = np.zeros((6, n))
         self._win: PracticeWindow | None = None
         self._dt = 0.0
-        self._evals = 0
+        self._c = np.zeros(1, np.int64)  # evaluations in the sums
         self._alpha = 1.0
         self._prior_evals = 1.0
         self._fast = 1.0
@@ -177,7 +181,8 @@ class PracticeBlend:
         if x is None:
             return
         y = self._win.ref
-        self._evals += 1
+        self._c[0] += 1
+        evals = int(self._c[0])
         t = self._t
         kx, fx = x
         np.multiply(kx, kx, out=t[0])
@@ -187,17 +192,23 @@ class PracticeBlend:
         np.multiply(y, fx, out=t[4])
         np.multiply(y, y, out=t[5])
         t -= self._s
-        t *= max(self._alpha, 1.0 / self._evals)
+        t *= max(self._alpha, 1.0 / evals)
         self._s += t
+
+    @property
+    def evaluations(self) -> int:
+        """Evaluations against the practice in the sums (they never restart)."""
+        return int(self._c[0])
 
     def update(self) -> np.ndarray:
         """beta (n,) from the sums so far (asked at the filter's noise updates, not per sample)."""
-        if self._evals:
+        evals = self.evaluations
+        if evals:
             kk, kf, ff, yk, yf, _ = self._s
             dd = kk - 2.0 * kf + ff
             b = np.divide(yk - yf - kf + ff, dd, out=np.full(self.n, PRIOR_BETA), where=dd > 0.0)
             np.clip(b, 0.0, 1.0, out=b)
-            m = min(self._evals, 1.0 / self._alpha)  # the average's own weight, at most TAU_S
+            m = min(evals, 1.0 / self._alpha)  # the average's own weight, at most TAU_S
             w = m / (m + self._prior_evals)
             np.multiply(b, w, out=self.beta)
             self.beta += (1.0 - w) * PRIOR_BETA
@@ -229,7 +240,7 @@ class PracticeBlend:
         dd = kk - 2.0 * kf + ff
         res = self.residual()
         ratio = np.divide(res, dd, out=np.ones(self.n), where=dd > 0.0)
-        m = self._evals
+        m = self.evaluations
         w = m / (m + self._prior_evals) if m else 0.0
         ratio *= w
         ratio += (1.0 - w) * PRIOR_RATIO

@@ -30,7 +30,8 @@ are taken as on the grid; a sample that arrives 1.5 nominal periods or more afte
 has the missed ones filled in on the straight line between the two). A restart (reset, a
 discontinuity) starts the ring again; the filter is used once it holds the kernel's span.
 
-Cost: one (K,) @ (K, n) product per sample (100 Hz: K = 25) and a ring row.
+Cost: one (K,) @ (K, n) product per sample (100 Hz: K = 25) and a ring row; in a filter,
+one compiled call with the blend and the output (practice_step.py; this is its reference).
 """
 
 from __future__ import annotations
@@ -124,14 +125,18 @@ class PracticeFIR:
         self.n = n
         self.dt = 0.0
         self.K = 0
-        self.count = 0
+        self._c = np.zeros(2, np.int64)  # [samples put in the ring, the newest's stamp (ns)]
         self.out = np.zeros(n)
         self._w = np.zeros(1)
         self._sum = 0.0
         self._ring = np.zeros((2, n))
         self._last = np.zeros(n)
         self._tmp = np.zeros(n)
-        self._t_ns = 0
+
+    @property
+    def count(self) -> int:
+        """Samples put in the ring since the last restart (the dropped ones filled in count)."""
+        return int(self._c[0])
 
     def configure(self, dt: float) -> None:
         """Kernels and ring for nominal period dt (kept while the period stays within 5 %)."""
@@ -144,7 +149,7 @@ class PracticeFIR:
         self._w = np.ascontiguousarray(w[::-1])
         self._sum = float(self._w.sum())
         self._ring = np.zeros((2 * (K + 1), self.n))
-        self.count = 0
+        self._c[0] = 0
 
     @property
     def ready(self) -> bool:
@@ -153,27 +158,27 @@ class PracticeFIR:
 
     def restart(self) -> None:
         """No kernel spans this point (a reset, a discontinuity)."""
-        self.count = 0
+        self._c[0] = 0
 
     def _put(self, q: np.ndarray) -> None:
         w = self.K + 1
-        j = self.count % w
+        j = self._c[0] % w
         self._ring[j] = q
         self._ring[j + w] = q
-        self.count += 1
+        self._c[0] += 1
 
     def push(self, t_ns: int, q: np.ndarray) -> None:
         """The newest sample (positions; the gate's prediction for a held joint)."""
         if not self.K:
             return
-        if self.count:
-            gap = (t_ns - self._t_ns) * 1e-9 / self.dt
+        if self._c[0]:
+            gap = (t_ns - int(self._c[1])) * 1e-9 / self.dt
             missed = min(round(gap) - 1, self.K + 1)
             for i in range(1, missed + 1):  # dropped samples: on the line between the two
                 self._put(self._last + (q - self._last) * (i / (missed + 1)))
         self._put(q)
         np.copyto(self._last, q)
-        self._t_ns = t_ns
+        self._c[1] = t_ns
 
     def restore_last(self, genuine: np.ndarray, q: np.ndarray) -> None:
         """The gate found the last sample genuine on these joints: its positions back in."""

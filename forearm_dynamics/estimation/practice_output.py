@@ -21,13 +21,20 @@ beside the model's own, once the filter's ring holds the kernel's span, faded in
 when a joint leaves the rule) linearly over FADE_S so that q̈ does not jump; a restart (a
 reset, a discontinuity) drops them at once, as the model restarts there too.
 
+Per sample it is two compiled calls where the extension is built (practice_step.py: the
+filter's ring, and the filter's q̈, the blend's sums, the fade and the output); the numpy
+code here and in practice_fir.py / practice_blend.py is their reference.
+
 `PracticeOutput` is a mixin of KalmanCA: it reads _pfir, _pblend, _pf_use, _pf_w, _out,
-_dt, psd, _r, _floor, noise_estimator and writes the output's q̈ row.
+_dt, psd, _r, _floor, noise_estimator, writes the output's q̈ row and keeps the compiled
+step in _pstep (bound to the arrays of _pstep_key).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from . import practice_step
 
 #: seconds over which a joint's q̈ moves between the model's and the blend's
 FADE_S = 0.1
@@ -67,16 +74,54 @@ class PracticeOutput:
         self._passes_what_the_practice_removes(use, self._pf_was, BAND_HZ, dt)
         np.multiply(use, self._pf_share, out=self._pf_target)
 
+    def python_practice(self):
+        """Run the practice filter numpy's way from now on, after a new rate too (the compiled
+        step's reference: test_practice_step.py, benchmarks/compiled_cost.py); returns self."""
+        self._pcompiled = False
+        self._pstep = None
+        return self
+
+    def _practice_compiled(self):
+        """The compiled step bound to the filter's and the blend's arrays of now (practice_step.py),
+        bound again after either's configure(); None: numpy's way."""
+        key = (self._pfir._ring, self._pblend._win)
+        old = self._pstep_key
+        if self._pcompiled and (old is None or key[0] is not old[0] or key[1] is not old[1]):
+            self._pstep_key = key
+            self._pstep = None if key[1] is None or not self._pfir.K else practice_step.bind(
+                self._pfir, self._pblend, self._pf_w, self._pf_target, self._pf_use, self._out[2],
+                self._pf_share, FADE_S)
+        return self._pstep
+
+    def _practice_push(self, t_ns: int, q: np.ndarray) -> None:
+        """The sample's positions (the gate's prediction for a held joint) into the filter's ring."""
+        fast = self._practice_compiled() if self._pfir.K else None
+        if fast is not None:
+            try:
+                fast.push(t_ns, q)
+            except (TypeError, ValueError, BufferError):  # not contiguous float64: numpy's way
+                pass
+            else:
+                return
+        self._pfir.push(t_ns, q)
+
     def _practice_filter_output(self, q: np.ndarray) -> None:
         """q̈ of the rule's joints: the blend of the model's and the practice filter's; every
         sample's two q̈ estimates into the blend's window. q: the sample's positions (the
-        gate's prediction for a held joint)."""
+        gate's prediction for a held joint). One compiled call where it is built."""
+        fast = self._practice_compiled()
+        if fast is not None:
+            try:
+                fast.output(self._dt, q)
+            except (TypeError, ValueError, BufferError):  # not contiguous float64: numpy's way
+                pass
+            else:
+                return
         pf = self._pfir
         w = self._pf_w
         qdd = self._out[2]
         if not pf.ready:  # restarted: the model restarts too, its output is the one there is
             w.fill(0.0)
-            self._pf_fading = False
             return
         f = pf.estimate()
         self._pblend.add(q, qdd, f)
@@ -90,7 +135,6 @@ class PracticeOutput:
             np.clip(d, -step, step, out=d)  # at most a step, never past the target
             w += d
             np.copyto(w, target, where=arrive)  # exactly there (w + (t - w) may miss by an ulp)
-        self._pf_fading = not done
         if not w.any():
             return
         # the blend f + beta (k - f) = k + (1 - beta)(f - k), then faded: k + w (blend - k)
