@@ -285,6 +285,34 @@ def test_registry_settings_and_descriptions() -> None:
         assert all(v >= 0.0 for v in d["lag_s"].values())
 
 
+@pytest.mark.parametrize("velocities", [True, False])
+def test_describe_on_a_jittered_stream_solves_no_riccati(monkeypatch, velocities) -> None:
+    """torque_node asks describe() at every diagnostics period, on its executor thread, with
+    the stream's last step: on a jittered stream a new step each time. It describes the gain
+    in use (a Riccati solve per new step cost 1-16 ms there), and that lag is the one the
+    converged filter has at that step, to the groups' JITTER."""
+    from forearm_dynamics.estimation import ca_model
+
+    rng = np.random.default_rng(7)
+    n, t = 4, 10**12
+    e = make_estimator("kalman", n)
+    for k in range(3000):
+        t += 1_000_000 + int(rng.integers(-100_000, 100_000))
+        q = np.sin(k * 1e-3) + rng.normal(0.0, 1e-3, n)
+        e.update(t, q, np.cos(k * 1e-3) + rng.normal(0.0, 1e-2, n) if velocities else None)
+    solves = []
+    real = ca_model.solve_discrete_are
+    monkeypatch.setattr(ca_model, "solve_discrete_are", lambda *a: solves.append(1) or real(*a))
+    steps = 1e-3 * (1.0 + rng.uniform(-0.1, 0.1, 20))
+    lags = [e.describe(float(dt), velocities)["lag_s"]["qdd"] for dt in steps]
+    assert not solves
+    g = max(e._groups, key=lambda g: g.r)  # the noisiest joints' group: its noise is a bin's
+    k, _ = steady_state(1e-3, g.r, g.rv if velocities else None, e.psd)
+    converged = ca_model.qdd_lag(1e-3, k, velocities)
+    assert all(abs(x - converged) <= 0.1 * converged for x in lags), (lags, converged)
+    assert solves  # the reference above was solved through the counted function
+
+
 def test_kalman_lag_matches_a_constant_jerk() -> None:
     """lag()['qdd'] is the delay of qdd under a constant jerk, measured on a cubic."""
     dt = 0.004

@@ -98,6 +98,7 @@ white noise (the noise estimate is unbiased there, as the first version's was).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -119,6 +120,19 @@ from .practice_output import BAND_HZ, PracticeOutput
 
 NOISE_EVERY_S = 0.25
 MAX_DELAY_S = 0.2
+
+
+#: lag(): the gain in use describes a step within this fraction of the one asked about (the
+#: groups keep a gain while the step stays within noise_groups.JITTER of the period)
+LAG_DT_TOL = 0.25
+
+
+@functools.lru_cache(maxsize=64)
+def _steady_gain(dt: float, r: float, r_v: float | None, psd: float) -> np.ndarray:
+    """The converged filter's gain (read-only; lag() before a group has one)."""
+    k, _ = steady_state(dt, r, r_v, psd)
+    k.setflags(write=False)
+    return k
 
 
 class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCompiled,
@@ -462,14 +476,22 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
     # -- description ------------------------------------------------------------------------
     def lag(self, dt: float, velocity_given: bool) -> dict[str, float]:
         """q, qd: 0 (exact for constant acceleration); qdd: steady-state error / jerk of the
-        noisiest joint's gain (a delay shortens it: the smoothed estimate is centred)."""
+        noisiest joint's gain (a delay shortens it: the smoothed estimate is centred).
+
+        The gain in use, at the step it was computed for, while that step is within LAG_DT_TOL
+        of dt; else the converged filter's at dt (_steady_gain, cached). The node asks at
+        every diagnostics period, on its executor thread, with the stream's last step, which
+        jitter moves: a Riccati solve for each new step cost 1-16 ms there (a 1 kHz stream
+        with ±10 % jitter, /tmp timing beside a CI run), 1-16 samples held back each second."""
         i = max(range(len(self._groups)), key=lambda i: self._groups[i].r, default=None)
         m = 2 if velocity_given else 1
-        k = None if i is None else self._group_gain(i, m)  # the gain in use: no Riccati solve
-        if k is None or abs(self._gstate[i, Col.DT] - dt) > 1e-3 * dt:  # on a node thread
-            r = float(self._r.max())
-            k, _ = steady_state(dt, r, float(self._rv.max()) if velocity_given else None, self.psd)
-        d = ca_model.qdd_lag(dt, k, velocity_given)
+        k = None if i is None else self._group_gain(i, m)
+        at = dt if k is None else float(self._gstate[i, Col.DT])
+        if k is None or abs(at - dt) > LAG_DT_TOL * dt:
+            at = dt
+            k = _steady_gain(dt, float(self._r.max()),
+                             float(self._rv.max()) if velocity_given else None, self.psd)
+        d = ca_model.qdd_lag(at, k, velocity_given)
         return {"q": 0.0, "qd": 0.0, "qdd": max(0.0, d - self.delay_s)}
 
     def describe(self, dt: float, velocity_given: bool = False) -> dict:
