@@ -124,6 +124,19 @@ static int callable(Practice *self, Py_ssize_t nargs, const char *usage) {
     return 1;
 }
 
+/* out[j] = sum_k w[k] rows[k][j] over the m rows (n wide), summed in k's order for every j
+ * (the row loop outside: each row read once, in memory order) */
+static void weighted_rows(const double *w, Py_ssize_t m, const double *rows, Py_ssize_t n,
+                          double *out) {
+    for (Py_ssize_t j = 0; j < n; j++)
+        out[j] = w[0] * rows[j];
+    for (Py_ssize_t k = 1; k < m; k++) {
+        const double wk = w[k], *row = rows + k * n;
+        for (Py_ssize_t j = 0; j < n; j++)
+            out[j] = out[j] + wk * row[j];
+    }
+}
+
 /* PracticeFIR._put: a row into the ring, twice (every window one slice) */
 static void put(Practice *self, const double *row) {
     const Py_ssize_t n = self->n, w = self->K + 1;
@@ -194,12 +207,7 @@ static void blend_add(Practice *self, const double *q, const double *k, const do
     /* the practice of the sample h back: the kernel over the window, in order */
     const double *win = wq + (Py_ssize_t)(c % W) * n, *ker = BUF(P_KER);
     double *y = BUF(P_REF);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double acc = ker[0] * win[j];
-        for (Py_ssize_t m = 1; m < W; m++)
-            acc = acc + ker[m] * win[m * n + j];
-        y[j] = acc;
-    }
+    weighted_rows(ker, W, win, n, y);
     const double *kx = wx + (Py_ssize_t)(c % (h + 1)) * 2 * n, *fx = kx + n;
     int64_t *ev = CTR(P_BCTR);
     ev[0] += 1;
@@ -237,12 +245,9 @@ static PyObject *Practice_output(Practice *self, PyObject *const *args, Py_ssize
     /* PracticeFIR.estimate: sum_k w_k x(t - k dt) - x(t) sum_k w_k, the window oldest first */
     const double *win = BUF(P_RING) + (Py_ssize_t)(count % (K + 1)) * n, *taps = BUF(P_W);
     double *f = BUF(P_FOUT);
-    for (Py_ssize_t j = 0; j < n; j++) {
-        double acc = taps[0] * win[j];
-        for (Py_ssize_t k = 1; k < K; k++)
-            acc = acc + taps[k] * win[k * n + j];
-        f[j] = acc - win[K * n + j] * self->sum;
-    }
+    weighted_rows(taps, K, win, n, f);
+    for (Py_ssize_t j = 0; j < n; j++)
+        f[j] = f[j] - win[K * n + j] * self->sum;
     blend_add(self, qb.buf, qdd, f);
     PyBuffer_Release(&qb);
     const double *target = BUF(P_TARGET), *share = BUF(P_SHARE);
