@@ -20,6 +20,7 @@ from __future__ import annotations
 import fcntl
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -32,6 +33,36 @@ from pathlib import Path
 #: The venv's (or colcon install's) console scripts sit next to its python.
 BIN = Path(sys.executable).parent
 _NOT_INHERITED = ("ROS_", "RMW_", "FASTRTPS", "FASTDDS", "LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP")
+
+
+#: native_stacks: frames per thread, and the most characters of the whole
+NATIVE_FRAMES = 20
+NATIVE_CHARS = 30_000
+
+
+def native_stacks(pid: int, timeout: float = 60.0) -> str:
+    """Every thread's native stack of process `pid`, main thread first, by gdb where it is
+    installed ("" where not): a process blocked inside C code (a DDS call, rcl's shutdown)
+    shows in its Python stacks only as the line that made the call. A test's torque_node
+    and trajectory_publisher, stopped beside a second suite, each once hung past 60 s after
+    SIGINT, the second in rclpy's _logging_fini (rcl_logging_fini, in C)."""
+    gdb = shutil.which("gdb")
+    if gdb is None:
+        return ""
+    try:
+        done = subprocess.run([gdb, "-p", str(pid), "-batch", "-nx", "-ex",
+                               f"thread apply all bt {NATIVE_FRAMES}"],
+                              capture_output=True, text=True, timeout=timeout, check=False)
+    except (subprocess.TimeoutExpired, OSError) as exc:
+        return f"\nnative stacks: gdb failed: {exc}"
+    threads: list[list[str]] = []
+    for line in done.stdout.splitlines():
+        if line.startswith("Thread "):
+            threads.append([line])
+        elif line.startswith("#") and threads:
+            threads[-1].append(line[:200])
+    text = "\n".join("\n".join(t) for t in reversed(threads))  # gdb lists the main thread last
+    return f"\nnative stacks (gdb, {len(threads)} threads):\n{text[:NATIVE_CHARS]}"
 
 
 def ros_env(domain: int, log_dir: Path | str, extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -263,19 +294,22 @@ class Child:
         once the process is killed (a node that ignores SIGINT is a bug a test must see).
         `dump`: the process is one of our nodes, which print every thread's Python stack on
         SIGUSR1 (nodes/common.run): sent before the kill, so its output says where it hung
-        (any other process would die of SIGUSR1 instead of SIGKILL).
+        (any other process would die of SIGUSR1 instead of SIGKILL); with `strict`, the
+        message also holds its threads' native stacks (native_stacks).
         """
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
             try:
                 self.proc.wait(timeout=timeout)
             except subprocess.TimeoutExpired:
+                native = ""
                 if dump:
                     self.proc.send_signal(signal.SIGUSR1)
                     time.sleep(1.0)
+                    native = native_stacks(self.proc.pid) if strict else ""
                 self.proc.kill()
                 self.proc.wait(timeout=10)
                 if strict:
                     raise subprocess.TimeoutExpired(
-                        self.argv, timeout, output=self.text()[-6000:]) from None
+                        self.argv, timeout, output=self.text()[-6000:] + native) from None
         return self.proc.returncode

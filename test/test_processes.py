@@ -5,6 +5,7 @@ environment it hands out, logs that never collide, waiting, and stopping by PID 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -17,10 +18,12 @@ from forearm_dynamics.processes import Child, claim_domain, lease_domain, ros_en
 
 pytestmark = pytest.mark.cli
 
-#: Prints "ready", then sleeps; with "stubborn" it ignores SIGINT.
+#: Prints "ready", then sleeps; with "stubborn" it ignores SIGINT; with "usr1" it prints on SIGUSR1
+#: (as our nodes print their stacks).
 SLEEPER = (
     "import signal, sys, time\n"
     "if 'stubborn' in sys.argv: signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+    "if 'usr1' in sys.argv: signal.signal(signal.SIGUSR1, lambda *a: print('usr1 seen', flush=True))\n"
     "print('ready', flush=True); print('to stderr', file=sys.stderr, flush=True)\n"
     "time.sleep(60)\n"
 )
@@ -202,6 +205,23 @@ def test_stubborn_child_is_killed_and_strict_raises(tmp_path) -> None:
     with pytest.raises(subprocess.TimeoutExpired):
         d.stop(timeout=0.5, strict=True)
     assert not d.running() and d.returncode == -signal.SIGKILL
+
+
+def test_a_hang_names_its_native_stacks(tmp_path) -> None:
+    """stop(dump=True, strict=True) on a process that ignores SIGINT: the raised message holds
+    its output (what it printed on SIGUSR1) and every thread's native stack from gdb (part of
+    these machines: /work/.library/env), the main thread first, blocked in its sleep."""
+    assert shutil.which("gdb"), "gdb: a hang's native stacks need it"
+    c = sleeper(tmp_path, "stubborn", "usr1")
+    assert c.wait_for("ready", 30)
+    with pytest.raises(subprocess.TimeoutExpired) as info:
+        c.stop(timeout=0.5, strict=True, dump=True)
+    out = info.value.output
+    assert "usr1 seen" in out, out
+    native = out.split("native stacks (gdb, ", 1)[1]
+    assert native.split("\n")[1].startswith("Thread 1 "), native[:400]
+    assert "sleep" in native.split("\nThread ")[1], native[:2000]  # the main thread's frames
+    assert not c.running() and c.returncode == -signal.SIGKILL
 
 
 def test_sampler_reads_cpu_and_memory(tmp_path) -> None:
