@@ -36,7 +36,7 @@ EXECUTABLES = {
 KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
                         [f"{PACKAGE}/estimation/_kalman_step.c",
                          f"{PACKAGE}/estimation/_practice_step.c"],
-                        depends=[f"{PACKAGE}/estimation/_practice_step.h"],
+                        depends=[f"{PACKAGE}/estimation/_kalman_step.h"],
                         extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 # The noise estimator's per-sample store in C (estimation/noise_step.py says why); optional

@@ -19,7 +19,7 @@
  * Built with -ffp-contract=off: no fused multiply-add, each product and sum rounded as the
  * numpy path rounds it (test_kalman_step.py compares the two; test_group_step.py the gains).
  */
-#include "_practice_step.h" /* Practice: the practice filter's step, registered below */
+#include "_kalman_step.h" /* get_vector, bound_call; Practice, registered below */
 
 #include <math.h>
 #include <string.h>
@@ -31,28 +31,9 @@ typedef struct {
     Py_ssize_t n;
 } Step;
 
-static int get_vector(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *what) {
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
-        return -1;
-    if (view->format == NULL || strcmp(view->format, "d") != 0 || view->len != n * 8) {
-        PyErr_Format(PyExc_ValueError, "%s: a contiguous float64 array of %zd values", what, n);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
-
 /* A call on a bound Step with its number of arguments; else the exception, and 0. */
 static int callable(Step *self, Py_ssize_t nargs, Py_ssize_t expected, const char *usage) {
-    if (self->held != 8) {
-        PyErr_SetString(PyExc_RuntimeError, "Step is not bound to its arrays");
-        return 0;
-    }
-    if (nargs != expected) {
-        PyErr_SetString(PyExc_TypeError, usage);
-        return 0;
-    }
-    return 1;
+    return bound_call(self->held, 8, "Step", nargs, expected, usage);
 }
 
 static void Step_dealloc(Step *self) {

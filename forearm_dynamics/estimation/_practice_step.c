@@ -17,7 +17,7 @@
  * hands to BLAS (the FIR's taps, the practice's kernel) are summed here in order, so those
  * two round differently (test_practice_step.py bounds the difference over whole streams).
  */
-#include "_practice_step.h"
+#include "_kalman_step.h"
 
 #include <math.h>
 #include <string.h>
@@ -99,29 +99,9 @@ static int Practice_init(Practice *self, PyObject *args, PyObject *kwds) {
     return 0;
 }
 
-/* q: the call's positions (n,), float64 and contiguous; else a ValueError, and -1. */
-static int get_q(Practice *self, PyObject *obj, Py_buffer *view) {
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
-        return -1;
-    if (view->format == NULL || strcmp(view->format, "d") != 0 || view->len != self->n * 8) {
-        PyErr_Format(PyExc_ValueError, "q: a contiguous float64 array of %zd values", self->n);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
-
 /* A call on a bound Practice with its two arguments; else the exception, and 0. */
 static int callable(Practice *self, Py_ssize_t nargs, const char *usage) {
-    if (self->held != N_PB) {
-        PyErr_SetString(PyExc_RuntimeError, "Practice is not bound to its arrays");
-        return 0;
-    }
-    if (nargs != 2) {
-        PyErr_SetString(PyExc_TypeError, usage);
-        return 0;
-    }
-    return 1;
+    return bound_call(self->held, N_PB, "Practice", nargs, 2, usage);
 }
 
 /* out[j] = sum_k w[k] rows[k][j] over the m rows (n wide), summed in k's order for every j
@@ -154,7 +134,7 @@ static PyObject *Practice_push(Practice *self, PyObject *const *args, Py_ssize_t
     if (t_ns == -1 && PyErr_Occurred())
         return NULL;
     Py_buffer qb;
-    if (get_q(self, args[1], &qb) < 0)
+    if (get_vector(args[1], self->n, &qb, "q") < 0)
         return NULL;
     const double *q = qb.buf;
     double *last = BUF(P_LAST);
@@ -232,7 +212,7 @@ static PyObject *Practice_output(Practice *self, PyObject *const *args, Py_ssize
     if (dt == -1.0 && PyErr_Occurred())
         return NULL;
     Py_buffer qb;
-    if (get_q(self, args[1], &qb) < 0)
+    if (get_vector(args[1], self->n, &qb, "q") < 0)
         return NULL;
     const Py_ssize_t n = self->n, K = self->K;
     const int64_t count = CTR(P_FCTR)[F_COUNT];

@@ -78,6 +78,16 @@ def steady_posterior(dt: float, r: float, r_v: float | None, psd: float) -> Cov:
 
 
 @functools.lru_cache(maxsize=64)
+def steady_gain(dt: float, r: float, r_v: float | None, psd: float) -> np.ndarray:
+    """The converged filter's gain K (3, m), read-only, cached per (dt, r, r_v, psd):
+    KalmanCA.lag() describes a filter with it before a group has a gain of its own (a node's
+    diagnostics ask every period, on its executor thread)."""
+    k, _ = steady_state(dt, r, r_v, psd)
+    k.setflags(write=False)
+    return k
+
+
+@functools.lru_cache(maxsize=64)
 def restart_posterior(r: float, r_v: float | None, psd: float, horizon_s: float) -> Cov:
     """Where a filter restarted from one sample (q the sample, q̇ 0 or the given velocity,
     q̈ 0) is seated: the spread the white jerk gives a state over horizon_s from a known one

@@ -98,7 +98,6 @@ white noise (the noise estimate is unbiased there, as the first version's was).
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -125,14 +124,6 @@ MAX_DELAY_S = 0.2
 #: lag(): the gain in use describes a step within this fraction of the one asked about (the
 #: groups keep a gain while the step stays within noise_groups.JITTER of the period)
 LAG_DT_TOL = 0.25
-
-
-@functools.lru_cache(maxsize=64)
-def _steady_gain(dt: float, r: float, r_v: float | None, psd: float) -> np.ndarray:
-    """The converged filter's gain (read-only; lag() before a group has one)."""
-    k, _ = steady_state(dt, r, r_v, psd)
-    k.setflags(write=False)
-    return k
 
 
 class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCompiled,
@@ -479,7 +470,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         noisiest joint's gain (a delay shortens it: the smoothed estimate is centred).
 
         The gain in use, at the step it was computed for, while that step is within LAG_DT_TOL
-        of dt; else the converged filter's at dt (_steady_gain, cached). The node asks at
+        of dt; else the converged filter's at dt (ca_model.steady_gain, cached). The node asks at
         every diagnostics period, on its executor thread, with the stream's last step, which
         jitter moves: a Riccati solve for each new step cost 1-16 ms there (a 1 kHz stream
         with ±10 % jitter, /tmp timing beside a CI run), 1-16 samples held back each second."""
@@ -489,7 +480,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         at = dt if k is None else float(self._gstate[i, Col.DT])
         if k is None or abs(at - dt) > LAG_DT_TOL * dt:
             at = dt
-            k = _steady_gain(dt, float(self._r.max()),
+            k = ca_model.steady_gain(dt, float(self._r.max()),
                              float(self._rv.max()) if velocity_given else None, self.psd)
         d = ca_model.qdd_lag(at, k, velocity_given)
         return {"q": 0.0, "qd": 0.0, "qdd": max(0.0, d - self.delay_s)}

@@ -95,7 +95,7 @@ class PracticeOutput:
 
     def _practice_push(self, t_ns: int, q: np.ndarray) -> None:
         """The sample's positions (the gate's prediction for a held joint) into the filter's ring."""
-        fast = self._practice_compiled() if self._pfir.K else None
+        fast = self._practice_compiled()
         if fast is not None:
             try:
                 fast.push(t_ns, q)
