@@ -83,6 +83,7 @@ class Peer:
     def close(self) -> None:
         self.executor.remove_node(self.node)
         self.node.destroy_node()
+        self.executor.shutdown()  # else it keeps the node in the graph
         self.context.try_shutdown()
 
 

@@ -98,6 +98,7 @@ class Peer:
         self._thread.join(timeout=5)
         self.executor.remove_node(self.node)
         self.node.destroy_node()
+        self.executor.shutdown()  # else it keeps the node in the graph
         self.context.try_shutdown()
 
 

@@ -8,6 +8,7 @@ other and nothing leaves loopback. Processes are stopped by their own PID only.
 from __future__ import annotations
 
 import atexit
+import functools
 import itertools
 import os
 import shutil
@@ -15,6 +16,7 @@ import signal
 import subprocess
 import tempfile
 import time
+from importlib.metadata import entry_points
 from pathlib import Path
 
 from forearm_dynamics import processes
@@ -36,6 +38,8 @@ __all__ = [
 
 _session_lease: DomainLease | None = None
 _test_leases: list[DomainLease] = []
+#: Peers not yet closed: release_test_domains() closes those on the domains it frees
+_open_peers: list[Peer] = []
 _counter = itertools.count()
 
 
@@ -72,7 +76,14 @@ def test_domain(lo: int, hi: int) -> int:
 
 
 def release_test_domains() -> None:
-    """Free every test_domain() lease; call once no process started on them runs."""
+    """Free every test_domain() lease; call once no process started on them runs. A Peer
+    still open on one of them (a harness whose start failed before its test could close
+    it) is closed first: else it stays in the graph, and the next holder of the domain (a
+    later module, another session) finds a node it did not start (test_units_live saw a
+    `/fault_peer` publishing joint_states in its own leased domain)."""
+    freed = {lease.domain for lease in _test_leases}
+    for peer in [p for p in _open_peers if p.domain in freed]:
+        peer.close()
     while _test_leases:
         _test_leases.pop().release()
 
@@ -104,6 +115,15 @@ class Hang(subprocess.TimeoutExpired):
         return f"{super().__str__()}; its output:\n{self.output or '(none)'}"
 
 
+@functools.cache
+def node_executables() -> frozenset[str]:
+    """Our nodes' executables, as the installed package declares them (setup.py's
+    EXECUTABLES): they print every thread's stack on SIGUSR1 (nodes/common.run), which would
+    end any other process, the venv's python among them, before its stacks were taken."""
+    return frozenset(ep.name for ep in entry_points(group="console_scripts")
+                     if ep.value.startswith("forearm_dynamics.nodes."))
+
+
 class NodeProcess(Child):
     """One started executable (processes.Child, stdout and stderr in files of their own),
     with the test-friendly names and strictness: wait() raises on timeout, stop() raises
@@ -124,19 +144,28 @@ class NodeProcess(Child):
     def output(self) -> str:
         return self.text()
 
+    @property
+    def is_node(self) -> bool:
+        exe = Path(self.argv[0])
+        return exe.parent == BIN and exe.name in node_executables()
+
     def wait_for_output(self, text: str, timeout: float = 10.0) -> bool:
         return self.wait_for(text, timeout)
 
     def wait(self, timeout: float = 30.0) -> int:
         """The exit code; a process still running after `timeout` s raises TimeoutExpired
         with its output, after one of our nodes printed its threads' stacks (SIGUSR1,
-        nodes/common.run): a hang says where it hangs."""
+        nodes/common.run), and with every thread's native stack (a wait inside C code, as
+        stop()'s message has it): a hang says where it hangs."""
         code = super().wait(timeout)
         if code is None:
-            if self.argv[0].startswith(str(BIN)) and self.proc.poll() is None:
+            native = ""
+            if self.is_node and self.proc.poll() is None:
                 self.proc.send_signal(signal.SIGUSR1)
                 time.sleep(1.0)
-            raise Hang(self.argv, timeout, output=self.text()[-6000:])
+            if self.proc.poll() is None:
+                native = processes.native_stacks(self.proc.pid)
+            raise Hang(self.argv, timeout, output=self.text()[-6000:] + native)
         return code
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 60.0) -> int:
@@ -148,7 +177,7 @@ class NodeProcess(Child):
         (subprocess.TimeoutExpired's message leaves the output out: a CI run beside a second
         suite lost the stacks of a torque_node that did not stop within 60 s of SIGINT)."""
         try:
-            return super().stop(sig, timeout, strict=True, dump=self.argv[0].startswith(str(BIN)))
+            return super().stop(sig, timeout, strict=True, dump=self.is_node)
         except subprocess.TimeoutExpired as exc:
             raise Hang(exc.cmd, exc.timeout, output=exc.output) from None
 
@@ -199,6 +228,7 @@ class Peer:
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
+        _open_peers.append(self)
 
     def spin_for(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
@@ -234,6 +264,13 @@ class Peer:
                 f"{sorted(full(ns, n) for n, ns in node.get_node_names_and_namespaces())}")
 
     def close(self) -> None:
+        """Leave the graph now. The EventsExecutor must be shut down too: until then it holds
+        the node's handle, destroy_node() only marks it, and the node and its endpoints stay
+        discoverable for as long as this process lives (test_processes)."""
+        if self not in _open_peers:
+            return
+        _open_peers.remove(self)
         self.executor.remove_node(self.node)
         self.node.destroy_node()
+        self.executor.shutdown()
         self.context.try_shutdown()

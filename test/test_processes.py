@@ -12,6 +12,7 @@ import sys
 import time
 
 import pytest
+from sensor_msgs.msg import JointState
 
 from benchmarks.procstat import Sampler, proc_stat
 from forearm_dynamics.processes import Child, claim_domain, lease_domain, ros_env
@@ -147,6 +148,42 @@ def test_a_test_domain_is_never_shared_it_waits_for_a_free_one() -> None:
         rosproc.release_test_domains()
 
 
+def _node_names(peer) -> list[str]:
+    return [name for name, _ in peer.node.get_node_names_and_namespaces()]
+
+
+def test_a_closed_peer_leaves_the_graph_and_a_released_domain_closes_its_peers() -> None:
+    """A closed Peer's node is gone from the graph as another participant sees it, and
+    release_test_domains() closes a peer its test never closed (a harness whose start
+    failed): else the next holder of the lease finds a node it did not start. Before
+    Peer.close shut its executor down, the node stayed for the life of the process."""
+    import rosproc
+
+    domain = rosproc.test_domain(102, 139)
+    try:
+        closed = rosproc.Peer("closed_peer", domain=domain)
+        left = rosproc.Peer("left_open_peer", domain=domain)
+        for peer in (closed, left):
+            peer.node.create_publisher(JointState, "joint_states", 10)
+        view = rosproc.Peer("view_peer", domain=domain)
+        names = lambda: _node_names(view)
+        assert view.spin_until(lambda: {"closed_peer", "left_open_peer"} <= set(names()),
+                               rosproc.STARTUP_S), names()
+        for peer in (closed, left):  # as a harness's peer does: then its executor holds it
+            peer.spin_for(0.2)
+        closed.close()
+        # hang guards, not timings: a node that stays, stays for good
+        assert view.spin_until(lambda: "closed_peer" not in names(), 30.0), names()
+        assert "left_open_peer" in names()
+        view.domain = -1  # not on a released domain to release_test_domains(): it watches
+        rosproc.release_test_domains()
+        assert left not in rosproc._open_peers and view in rosproc._open_peers
+        assert view.spin_until(lambda: "left_open_peer" not in names(), 30.0), names()
+        view.close()
+    finally:
+        rosproc.release_test_domains()
+
+
 def test_start_wait_for_and_stop(tmp_path) -> None:
     a, b = sleeper(tmp_path), sleeper(tmp_path, split=True)
     try:
@@ -222,6 +259,27 @@ def test_a_hang_names_its_native_stacks(tmp_path) -> None:
     assert native.split("\n")[1].startswith("Thread 1 "), native[:400]
     assert "sleep" in native.split("\nThread ")[1], native[:2000]  # the main thread's frames
     assert not c.running() and c.returncode == -signal.SIGKILL
+
+
+def test_a_test_wait_past_its_timeout_names_native_stacks(tmp_path) -> None:
+    """rosproc.NodeProcess.wait() on a process still running: Hang, whose message holds its
+    output and its threads' native stacks, as stop()'s does; the process is left running."""
+    import rosproc
+
+    node = rosproc.NodeProcess("sleeper", [sys.executable, "-c", SLEEPER], ros_env(42, tmp_path),
+                               tmp_path)
+    try:
+        assert node.wait_for("ready", 30)
+        # the venv's python is no node of ours: SIGUSR1 would have ended it, stacks untaken
+        assert not node.is_node and {"torque_node", "muscle_node"} <= rosproc.node_executables()
+        with pytest.raises(rosproc.Hang) as info:
+            node.wait(timeout=0.2)
+        native = str(info.value).split("native stacks (gdb, ", 1)[1]
+        assert "ready" in str(info.value)
+        assert "sleep" in native.split("\nThread ")[1], native[:2000]
+        assert node.running()
+    finally:
+        node.stop(signal.SIGKILL)
 
 
 def test_sampler_reads_cpu_and_memory(tmp_path) -> None:
