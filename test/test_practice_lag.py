@@ -75,3 +75,46 @@ def test_exact_input_keeps_the_models_smoother_and_a_noisy_joint_beside_it_does_
     np.testing.assert_array_equal(a.q[:, 1:], b.q[:, 1:])
     late = (a.stamps_ns - t[0]) * 1e-9 > 2.0
     assert np.abs(a.qdd[late, 0] - b.qdd[late, 0]).max() > 1e-3
+
+
+def test_a_joint_leaves_the_practice_only_after_a_second_of_answers_for_the_model() -> None:
+    """The rule that puts a joint on the practice (coloured or wide) or keeps it on the model
+    (white, filtered narrower), shared by the delayed estimate and the causal filter: a joint
+    enters at once, and leaves once the rule has answered "the model" HOLD_UPDATES noise
+    updates (1 s) in a row. A fast movement reads as white noise for less than that (the
+    tuning half's running elbow swing left the practice mid-swing, and more delay bought
+    nothing there); a sensor whose noise turned white for good does leave."""
+    from forearm_dynamics.estimation import make_estimator
+    from forearm_dynamics.estimation.kalman import NOISE_EVERY_S
+
+    second = round(1.0 / NOISE_EVERY_S)  # noise updates in the documented 1 s
+    est = make_estimator("kalman", 2, {"delay_s": 0.1})
+    est.psd = 1e-12  # never wide: the coloured test alone decides
+    est._r[:] = math.radians(0.5)
+    levels = {"coloured": est._r / 2.0, "white": est._r.copy()}  # band / white: 2 and 1
+    answers: list[str] = []
+
+    def white(out: np.ndarray) -> np.ndarray:  # the white level the rule is asked with
+        np.copyto(out, levels[answers[-1]])
+        return out
+
+    est.noise_estimator.white = white
+    use, was, against = np.zeros(2, bool), np.zeros(2, bool), np.zeros(2, np.int64)
+
+    def ask(level: str) -> list[bool]:
+        answers.append(level)
+        est._passes_what_the_practice_removes(use, was, against, 6.0, 0.01)
+        assert (was == use).all()
+        return use.tolist()
+
+    assert ask("white") == [False, False]
+    assert ask("coloured") == [True, True]  # entering: at once
+    for _ in range(3):  # white answers for less than a second in a row: a movement
+        for _ in range(second - 1):
+            assert ask("white") == [True, True]
+        assert ask("coloured") == [True, True]
+    for _ in range(second - 1):
+        assert ask("white") == [True, True]
+    assert ask("white") == [False, False]  # the sensor's noise is white now: the model's
+    assert against.tolist() == [0, 0]
+    assert ask("coloured") == [True, True]  # and back at once

@@ -218,6 +218,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         self._pf_q: np.ndarray | None = None  # the last sample's positions (gate: prediction)
         self._pf_use = np.zeros(n, bool)  # the rule's joints
         self._pf_was = np.zeros(n, bool)
+        self._pf_against = np.zeros(n, np.int64)  # answers against, in a row (HOLD_UPDATES)
         self._pf_w = np.zeros(n)  # their share of the blend in q̈, faded in and out
         self._pf_target = np.zeros(n)  # ... towards this (practice_filter on the rule's joints)
         self._pf_d = np.zeros(n)
@@ -229,6 +230,7 @@ class KalmanCA(DelayedOutput, PracticeOutput, NoiseGroups, NoiseBelief, BindsCom
         self._plag = PracticeLag(n, lag_band) if on else None
         self._plag_use = np.zeros(n, bool)  # joints whose delayed estimate is the practice's
         self._plag_use_was = np.zeros(n, bool)
+        self._plag_against = np.zeros(n, np.int64)
         # the last sample for the noise statistics, taken after the output (learn())
         self._pending = False
         self._pend_t = 0

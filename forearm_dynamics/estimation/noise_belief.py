@@ -27,6 +27,16 @@ WHITE_ARM_EVALUATIONS = 25
 #: simulated 30 Hz camera (estimation_zoo: kalman fingers NRMSE 0.077 -> 0.138, every
 #: group worse, from commit 8f13e4e on; with this limit 0.077 again)
 WHITE_ARM_MAX_PERIOD_S = 0.005
+#: noise updates in a row (kalman.NOISE_EVERY_S: 1 s) the practice rule must answer "the
+#: model" before a joint that uses the practice leaves it; it enters at once. A fast movement
+#: raises the white level (third differences) as white noise would, for a moment: the running
+#: elbow swing of the corpus's tuning half (Hamner, 60 Hz) left the practice for 1.5 s
+#: mid-swing, its delayed estimates went to the model's smoother there, and more delay bought
+#: nothing (torque NRMSE 0.30 / 0.27 x the Butterworth at 0.1 / 0.2 s, median 0.12 / 0.04);
+#: a sensor's own noise does not change within a second. Entering is not held: a movement
+#: does not make noise look coloured, and holding both ways froze a short stream's first
+#: answer (the sensor zoo's held_exact σ rows moved more)
+HOLD_UPDATES = 4
 
 
 def _summary(r: np.ndarray, floor: float) -> float:
@@ -133,17 +143,25 @@ class NoiseBelief:
         if not self.noise_known(False):  # the band level is the default belief, not measured:
             use.fill(False)  # no joint is known to be coloured or wide yet (a short exact movement)
             return
-        self._passes_what_the_practice_removes(use, self._plag_use_was, self._plag.cutoff_hz,
+        self._passes_what_the_practice_removes(use, self._plag_use_was, self._plag_against,
+                                               self._plag.cutoff_hz,
                                                self.noise_estimator.period_s or self._dt)
 
-    def _passes_what_the_practice_removes(self, use: np.ndarray, was: np.ndarray, band_hz: float,
-                                          dt: float) -> None:
+    def _passes_what_the_practice_removes(self, use: np.ndarray, was: np.ndarray,
+                                          against: np.ndarray, band_hz: float, dt: float) -> None:
         """Into `use`: the joints the model lets content above band_hz through on (the rule
-        of _practice_lag_joints, also the practice filter's: practice_output.py); `was` the
-        last answer (the coloured test's hysteresis), updated."""
+        of _practice_lag_joints, also the practice filter's: practice_output.py); a joint
+        enters at once and leaves once the rule has said so HOLD_UPDATES times in a row.
+        `was`: the joints in use (also the coloured test's hysteresis) and `against` the
+        count of answers against, updated."""
         white = self.noise_estimator.white(self._tmp)
         np.greater(white, EXACT_WHITE * self._floor, out=use)
         wide = self.psd / (self._r**2 * dt) > (2.0 * math.pi * band_hz) ** 6
         coloured = self._r > np.where(was, practice_lag.KEEP_RATIO, COLOURED_RATIO) * white
         use &= wide | coloured
+        leave = was & ~use  # the rule says "the model" for a joint in use
+        against[leave] += 1
+        against[~leave] = 0
+        use |= was & (against < HOLD_UPDATES)  # entering at once, leaving once held
+        against[~use] = 0
         np.copyto(was, use)

@@ -40,7 +40,9 @@ white level; once used, down to KEEP_RATIO: no flicker) and the model already fi
 narrower than the practice's band, (psd / (r² dt))^(1/6) < 2 pi band: such a joint passes
 nothing the practice removes, and against the truth the model, right for white noise, is
 the better estimate (glove 90 Hz, sensor zoo: thumb/fingers 0.0101 / 0.0058 with p
-blended, 0.0091 / 0.0053 with the model's smoother). Samples the jump gate holds back enter
+blended, 0.0091 / 0.0053 with the model's smoother). A joint leaves only once the rule
+has said so for 1 s (noise_belief.HOLD_UPDATES): the running elbow of the tuning half left
+the practice mid-swing without it. Samples the jump gate holds back enter
 as the filter's prediction; one found genuine at the next step is restored.
 
 Numbers (tuning half only; /tmp drivers over benchmarks.corpus and the benchmark's

@@ -5,9 +5,11 @@ only, causal, at 25 Hz or faster, the noise measured, and per joint noisy (white
 floor: not exact or held input) and either filtered by the model wider than the practice's
 6 Hz, (psd / (r^2 dt))^(1/6) > 2 pi 6 Hz, or with coloured noise (band level above
 COLOURED_RATIO x the white level; once in, down to practice_lag.KEEP_RATIO): such a joint
-passes content the practice removes. The same rule as the delayed estimate's blend
-(practice_lag.py). A joint the model filters narrower with white noise (a 1.5 deg glove at
-90 Hz, a 3 deg camera at 30 Hz) keeps the model: nothing above the band is passed, and the
+passes content the practice removes. A joint enters at once and leaves once the rule has
+said so for 1 s (noise_belief.HOLD_UPDATES): a fast movement reads as white noise for a
+moment. The same rule as the delayed estimate's blend (practice_lag.py).
+A joint the model filters narrower with white noise (a 1.5 deg glove at 90 Hz, a 3 deg
+camera at 30 Hz) keeps the model: nothing above the band is passed, and the
 model, right for white noise, is the better estimate (real corpus's tuning half with 1 deg
 of added white noise: model 0.62 x the Butterworth, the practice filter 0.83 x; 3 deg:
 0.40 x against 0.83 x; /tmp study).
@@ -71,7 +73,7 @@ class PracticeOutput:
         self._pfir.configure(dt)
         self._pblend.configure(dt)
         self._pblend.update()
-        self._passes_what_the_practice_removes(use, self._pf_was, BAND_HZ, dt)
+        self._passes_what_the_practice_removes(use, self._pf_was, self._pf_against, BAND_HZ, dt)
         np.multiply(use, self._pf_share, out=self._pf_target)
 
     def python_practice(self):
