@@ -36,7 +36,8 @@ EXECUTABLES = {
 KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
                         [f"{PACKAGE}/estimation/_kalman_step.c",
                          f"{PACKAGE}/estimation/_practice_step.c"],
-                        depends=[f"{PACKAGE}/estimation/_kalman_step.h"],
+                        depends=[f"{PACKAGE}/estimation/_kalman_step.h",
+                                 f"{PACKAGE}/estimation/_buffers.h"],
                         extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 # The noise estimator's per-sample store in C (estimation/noise_step.py says why); optional
@@ -44,7 +45,8 @@ KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
 NOISE_STEP = Extension(f"{PACKAGE}.estimation._noise_step",
                        [f"{PACKAGE}/estimation/_noise_step.c",
                         f"{PACKAGE}/estimation/_noise_evaluations.c"],
-                       depends=[f"{PACKAGE}/estimation/_noise_step.h"],
+                       depends=[f"{PACKAGE}/estimation/_noise_step.h",
+                                f"{PACKAGE}/estimation/_buffers.h"],
                        extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 # The muscle node's arithmetic around the QP in C (muscles/muscle_step.py says why); optional

@@ -252,14 +252,8 @@ static int needs_step(const double *g, double dt, double period, double jitter, 
 }
 
 static PyObject *Gains_step(Gains *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (self->held != 6) {
-        PyErr_SetString(PyExc_RuntimeError, "Gains is not bound to its arrays");
+    if (!bound_call(self->held, 6, "Gains", nargs, 5, "step(dt, period, psd, vel, jitter)"))
         return NULL;
-    }
-    if (nargs != 5) {
-        PyErr_SetString(PyExc_TypeError, "step(dt, period, psd, vel, jitter)");
-        return NULL;
-    }
     double v[4];
     for (int i = 0; i < 4; i++) {
         const int a = i < 3 ? i : 4;

@@ -19,18 +19,6 @@
  */
 #include "_noise_step.h"
 
-
-static int get_vector(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *what) {
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
-        return -1;
-    if (view->format == NULL || strcmp(view->format, "d") != 0 || view->len != n * 8) {
-        PyErr_Format(PyExc_ValueError, "%s: a contiguous float64 array of %zd values", what, n);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
-
 static void release_all(Store *self) {
     for (int i = 0; i < self->held; i++)
         PyBuffer_Release(&self->bufs[i]);
@@ -110,14 +98,8 @@ static int Store_init(Store *self, PyObject *args, PyObject *kwds) {
 
 
 static PyObject *Store_store(Store *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (self->held != N_BUFS) {
-        PyErr_SetString(PyExc_RuntimeError, "Store is not bound to its arrays");
+    if (!bound_call(self->held, N_BUFS, "Store", nargs, 3, "store(t_ns, q, qd_or_None)"))
         return NULL;
-    }
-    if (nargs != 3) {
-        PyErr_SetString(PyExc_TypeError, "store(t_ns, q, qd_or_None)");
-        return NULL;
-    }
     const long long t_ns = PyLong_AsLongLong(args[0]);
     if (t_ns == -1 && PyErr_Occurred())
         return NULL;

@@ -10,6 +10,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "_buffers.h" /* get_vector, bound_call */
+
 /* noise_store.Ctr, then noise_store.Rate, in their order (noise_step.bind compares FIELDS) */
 enum { STARTED, ORIGIN, HAS_LAST, LAST_NS, LAST_D, SAME, COUNT, WCOUNT, VCOUNT, CAP, STRIDE,
        EVERY, WEVALS, VEVALS, PEVALS, IRREGULAR, N_CTR };
