@@ -286,6 +286,16 @@ class Child:
         except subprocess.TimeoutExpired:
             return None
 
+    def stacks(self, python: bool, native: bool = True) -> str:
+        """Where this running process is: with `python` (one of our nodes, nodes/common.run)
+        its threads' Python stacks into its output (SIGUSR1, then a second to print them; any
+        other process would die of it), and with `native` every thread's native stack,
+        returned (native_stacks; "" once the process has exited)."""
+        if python and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGUSR1)
+            time.sleep(1.0)
+        return native_stacks(self.proc.pid) if native and self.proc.poll() is None else ""
+
     def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0, strict: bool = False,
              dump: bool = False) -> int:
         """Signal this process only; SIGKILL if it has not exited after `timeout` s.
@@ -302,11 +312,7 @@ class Child:
             try:
                 self.proc.wait(timeout=timeout)
             except subprocess.TimeoutExpired:
-                native = ""
-                if dump:
-                    self.proc.send_signal(signal.SIGUSR1)
-                    time.sleep(1.0)
-                    native = native_stacks(self.proc.pid) if strict else ""
+                native = self.stacks(python=True, native=strict) if dump else ""
                 self.proc.kill()
                 self.proc.wait(timeout=10)
                 if strict:

@@ -159,12 +159,7 @@ class NodeProcess(Child):
         stop()'s message has it): a hang says where it hangs."""
         code = super().wait(timeout)
         if code is None:
-            native = ""
-            if self.is_node and self.proc.poll() is None:
-                self.proc.send_signal(signal.SIGUSR1)
-                time.sleep(1.0)
-            if self.proc.poll() is None:
-                native = processes.native_stacks(self.proc.pid)
+            native = self.stacks(python=self.is_node)
             raise Hang(self.argv, timeout, output=self.text()[-6000:] + native)
         return code
 
