@@ -65,7 +65,8 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml") + glob("config/*.json")),
         (f"share/{PACKAGE}/config/nodes", glob("config/nodes/*.yaml")),  # node parameters
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),  # ros2 launch (docs/ros.md)
-        (f"share/{PACKAGE}/examples", ["examples/closed_loop.py"]),  # closed_loop.launch.py runs it
+        # closed_loop.launch.py runs the example (its report module beside it)
+        (f"share/{PACKAGE}/examples", ["examples/closed_loop.py", "examples/closed_loop_report.py"]),
     ],
     package_data={PACKAGE: ["data/*"]},
     python_requires=">=3.10",

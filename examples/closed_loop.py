@@ -34,8 +34,11 @@ Modes. Real time (default): arm_sim steps on its own timer; one command per stat
 publishes. --lockstep: arm_sim steps once per command and publishes /clock, which
 trajectory_publisher and torque_node run on (use_sim_time): the controller steps when the
 reference of the current simulated time has come (or at once in the start delay and the
-gaps), so the loop runs in simulated time whatever the machine's load (a reference that
-does not come within WAIT_S is stepped over, counted).
+gaps, whose end it knows from the previous movement's marker), so the loop runs in
+simulated time whatever the machine's load and however late a marker comes (a reference
+that does not come within WAIT_S is stepped over, counted). Per movement it also prints
+how late its marker came and how many steps after the hold went without the reference of
+their time (0: the tracking error is the loop's own).
 
 Prints, per movement, the tracking error: RMS and max per joint of q_sim(t) - q_movement(t)
 (the library movement evaluated at arm_sim's stamp, from the movement's marker t0), over
@@ -65,6 +68,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import rclpy
+from closed_loop_report import report  # beside this file (installed with it)
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -98,7 +102,7 @@ class Controller:
     """Computed torque: feed-forward from torque_node + PD on arm_sim's state."""
 
     def __init__(self, node, arm, start_posture: np.ndarray, feedforward: bool = True,
-                 lockstep: bool = False):
+                 lockstep: bool = False, movements: int = 1, gap_s: float = GAP_S):
         self.model, self.data = arm.model, arm.model.createData()
         self.lockstep = lockstep
         self.q = start_posture.copy()  # the newest state
@@ -108,6 +112,9 @@ class Controller:
         self.outstanding = False  # lockstep: a command sent, its state not yet back
         self.waiting_since: float | None = None  # lockstep: waiting for the reference
         self.stale_steps = 0  # lockstep: steps taken without the reference of their time
+        self.movements, self.gap_ns = movements, round(gap_s * 1e9)
+        self.next_start: int | None = None  # lockstep: when the next movement is due (sim ns)
+        self.steps_ref: list[tuple[int, int]] = []  # lockstep: (state stamp, reference stamp) per step
         self.sim_t0_ns: int | None = None
         w = OMEGA[lockstep]
         self.kp, self.kd = w**2, 2 * ZETA * w
@@ -150,7 +157,20 @@ class Controller:
         self.sim_t0_ns = json.loads(msg.data)["t0_ns"]
 
     def on_marker(self, msg: String) -> None:
-        self.markers.append(json.loads(msg.data))
+        """A movement started; in lockstep also: when the next one is due. trajectory_publisher
+        starts it gap s after this one's last sample, at the first clock tick not earlier:
+        the controller stops there until its reference comes, so the arm never runs into a
+        movement whose marker is late (in a CI run one came only after the movement had
+        played: the arm tracked a reference ~0.1 s old, 0.17 rad off; the steps were
+        counted by nothing)."""
+        m = json.loads(msg.data)
+        m["seen_at_ns"] = self.t  # the simulated time it arrived at (lockstep: how late)
+        self.markers.append(m)
+        if m["index"] + 1 < self.movements:
+            self.next_start = (m["t0_ns"] + m["samples"] * round(1e9 / m["rate_hz"])
+                               + self.gap_ns)
+        else:
+            self.next_start = None
 
     def on_state(self, msg: JointState) -> None:
         now = time.time_ns()
@@ -169,15 +189,26 @@ class Controller:
     # -- lockstep: the simulated time is everyone's clock (/clock from arm_sim) ----------
     def playing(self, t: int) -> bool:
         """A movement is being replayed at simulated time t (its marker seen)."""
-        return any(m["t0_ns"] <= t < m["t0_ns"] + round(m["duration"] * 1e9) for m in self.markers)
+        return any(m["t0_ns"] <= t < _end_ns(m) for m in self.markers)
+
+    def needs_reference(self, t: int) -> bool:
+        """The step from simulated time t must wait for the reference of t: a movement plays
+        (its marker), or references come from one whose marker is not here yet, or the next
+        one is due (its start predicted from the previous marker). Otherwise (start delay,
+        gaps) no reference is coming and the arm holds."""
+        if self.ref_t >= t:
+            return False
+        if self.playing(t) or t >= (self.next_start or math.inf):
+            return True
+        return self.ref_t > max((_end_ns(m) for m in self.markers), default=0)  # (0: none yet)
 
     def try_step(self) -> None:
         """Step when the reference of the current simulated time is here (trajectory_publisher
         publishes it when /clock reaches that time, torque_node forwards it), or at once
-        when no movement is playing (start delay, gaps: the arm holds)."""
+        when none is coming."""
         if self.outstanding:
             return
-        if self.playing(self.t) and self.ref_t < self.t:
+        if self.needs_reference(self.t):
             if self.waiting_since is None:
                 self.waiting_since = time.monotonic()
             return
@@ -186,6 +217,7 @@ class Controller:
     def step(self) -> None:
         self.waiting_since = None
         self.outstanding = True
+        self.steps_ref.append((self.t, self.ref_t))
         self.command()
 
     def on_wait_timer(self) -> None:
@@ -211,59 +243,8 @@ class Controller:
         self.sent[np.asarray(self.cmd.effort).tobytes()] = time.time_ns()
 
 
-def tracking(ctrl: Controller) -> list[dict]:
-    """Per movement: RMS and max error per joint after hold_before, from the markers."""
-    stamps = np.array([s for s, _ in ctrl.states], dtype=np.int64)
-    qs = np.array([q for _, q in ctrl.states])
-    out = []
-    for mk in ctrl.markers:
-        mv = get_movement(mk["id"])
-        t = (stamps - mk["t0_ns"]) / 1e9
-        sel = (t >= mv.hold_before) & (t < mv.duration)
-        if sel.sum() < 100:
-            continue
-        q_ref, _, _ = mv.evaluate(t[sel])
-        err = qs[sel] - q_ref
-        out.append({"id": mv.id, "name": mv.name, "elbow": mv.elbow, "samples": int(sel.sum()),
-                    "rms_rad": dict(zip(JOINT_NAMES, np.sqrt((err**2).mean(0)).tolist(), strict=True)),
-                    "max_rad": dict(zip(JOINT_NAMES, np.abs(err).max(0).tolist(), strict=True)),
-                    "t": t[sel].tolist(), "q_sim": qs[sel].tolist(), "q_ref": q_ref.tolist()})
-    return out
-
-
-def _pct(ns: list[int]) -> str:
-    if not ns:
-        return "none"
-    p50, p99 = np.percentile(np.asarray(ns) / 1e6, [50, 99])
-    return f"p50 {p50:.2f} ms, p99 {p99:.2f} ms (n={len(ns)})"
-
-
-def plot(results: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    joints = ("elbow_flexion", "pro_sup", "wrist_flexion", "index_mcp_flexion")
-    fig, axes = plt.subplots(len(joints), len(results), figsize=(4 * len(results), 9),
-                             squeeze=False, sharex=True)
-    for c, r in enumerate(results):
-        t = np.asarray(r["t"])
-        for k, j in enumerate(joints):
-            i = JOINT_NAMES.index(j)
-            ax = axes[k][c]
-            ax.plot(t, np.degrees(np.asarray(r["q_ref"])[:, i]), "k-", lw=2, label="reference")
-            ax.plot(t, np.degrees(np.asarray(r["q_sim"])[:, i]), "r--", lw=1.2, label="arm_sim")
-            ax.set_ylabel(f"{j} (deg)")
-            if k == 0:
-                ax.set_title(f"movement {r['id']}: {r['name']}\nRMS {r['rms_rad'][j]:.2g} rad",
-                             fontsize=9)
-            else:
-                ax.set_title(f"RMS {r['rms_rad'][j]:.2g} rad", fontsize=9)
-        axes[-1][c].set_xlabel("time in movement (s)")
-    axes[0][0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+def _end_ns(marker: dict) -> int:
+    return marker["t0_ns"] + round(marker["duration"] * 1e9)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -289,7 +270,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.attach:  # the launch file's nodes, in the caller's ROS environment
         env = dict(os.environ)
     else:
-        lease = claim_domain(args.domain, "closed_loop")
+        try:
+            lease = claim_domain(args.domain, "closed_loop")
+        except ValueError as exc:  # a domain out of range: one line, no traceback
+            print(f"closed_loop: {exc}", file=sys.stderr)
+            return 2
         env = ros_env(lease.domain, out / "logs")
     start = movements[0].start
     posture = [a for n, x in zip(JOINT_NAMES, start, strict=True)
@@ -311,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
     rclpy.init()
     node = rclpy.create_node("closed_loop_controller")
     ctrl = Controller(node, build_model("segmented", 50), start, not args.no_feedforward,
-                      args.lockstep)
+                      args.lockstep, len(movements))
     executor = EventsExecutor()
     executor.add_node(node)
 
@@ -346,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
                 spin_for(0.1)
                 if len(ctrl.ff_ns) != seen:
                     seen, last = len(ctrl.ff_ns), time.monotonic()
-            return report(ctrl, args, movements, out)
+            return report(ctrl, args, movements, out, WAIT_S)
         pub = Child.script("trajectory_publisher", [
             "-p", f"movements:={ids}", "-p", "output_topic:=reference/joint_states",
             "-p", "start_delay:=0.5", "-p", f"gap:={GAP_S}", "-p", "min_subscribers:=1",
@@ -364,50 +349,7 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         for c in reversed(children):
             c.stop()
-    return report(ctrl, args, movements, out)
-
-
-def report(ctrl: Controller, args, movements, out: Path) -> int:
-    """Print and write the tracking error and latencies; 0 when every movement was tracked."""
-    results = tracking(ctrl)
-    mode = "PD only" if args.no_feedforward else "feed-forward (torque_node) + PD"
-    print(f"closed loop, {mode}, arm_sim {'lockstep' if args.lockstep else '1 kHz real time'}; "
-          f"load average "
-          f"{os.getloadavg()[0]:.2f} (2 cores)")
-    for r in results:
-        rms, mx = r["rms_rad"], r["max_rad"]
-        worst = max(rms, key=rms.get)
-        print(f"movement {r['id']:2d} ({r['name']}, {r['elbow']}): tracking RMS elbow "
-              f"{rms['elbow_flexion']:.2e}, pro_sup {rms['pro_sup']:.2e}, wrist "
-              f"{rms['wrist_flexion']:.2e} rad; worst joint {worst} RMS {rms[worst]:.2e}, "
-              f"max {mx[worst]:.2e} rad")
-    print(f"loop latency (command -> applied state back): {_pct(ctrl.loop_ns)}")
-    if args.lockstep:
-        print(f"lockstep: {len(ctrl.states)} steps, {ctrl.stale_steps} without the reference of "
-              f"their time (waited > {WAIT_S:g} s)")
-    if not args.lockstep:  # (lockstep: the stamps are simulated time)
-        print(f"feed-forward latency (reference stamp -> torque received): {_pct(ctrl.ff_ns)}")
-    summary = {"mode": mode, "movements": [{k: v for k, v in r.items() if k not in ("t", "q_sim", "q_ref")}
-                                           for r in results],
-               "loop_latency_ms": (np.percentile(np.asarray(ctrl.loop_ns) / 1e6, [50, 99]).tolist()
-                                   if ctrl.loop_ns else None),
-               "ff_latency_ms": (np.percentile(np.asarray(ctrl.ff_ns) / 1e6, [50, 99]).tolist()
-                                 if ctrl.ff_ns and not args.lockstep else None),
-               "lockstep": args.lockstep, "steps": len(ctrl.states),
-               "stale_steps": ctrl.stale_steps,
-               "loadavg": list(os.getloadavg())}
-    (out / "results.json").write_text(json.dumps(summary, indent=1))
-    np.savez(out / "tracking.npz", stamps=np.array([t for t, _ in ctrl.states], dtype=np.int64),
-             q=np.array([q for _, q in ctrl.states]), markers=json.dumps(ctrl.markers))
-    if args.plot:
-        plot(results, out / "closed_loop.png")
-        print(f"plot: {out / 'closed_loop.png'}")
-    print(f"results: {out / 'results.json'}")
-    if len(results) != len(movements):
-        print(f"closed_loop: {len(results)} of {len(movements)} movements were tracked",
-              file=sys.stderr)
-        return 2
-    return 0
+    return report(ctrl, args, movements, out, WAIT_S)
 
 
 if __name__ == "__main__":

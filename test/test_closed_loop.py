@@ -5,11 +5,14 @@ the other two), so the loop runs in simulated time and the error does not depend
 machine's load (real time on this loaded machine: docs/virtual-arm.md).
 
 Three movements (a pronation, opening the hand, closing the supinated hand while flexing
-the wrist; each after a jump from the previous one's end posture). Bounds: tracking RMS per
-joint over each movement after its 0.5 s hold <= 1e-2 rad on every joint and <= 5e-3 rad
-on the elbow, pro/sup and wrist (measured worst: 1.45e-3 rad, pro_sup of movement 1, at
-load 20 on 2 cores). PD alone (--no-feedforward) misses by 0.74-0.94 rad (real time, load
-11): the bound is on what the feed-forward does.
+the wrist; each after a jump from the previous one's end posture). Bounds: every step after
+a movement's 0.5 s hold had the reference of its time (the loop ran in step: a CI run
+whose movement-26 marker came late tracked a ~0.1 s old reference, fingers 0.17 rad off);
+tracking RMS per joint over each movement after its hold <= 1e-2 rad on every joint and
+<= 5e-3 rad on the elbow, pro/sup and wrist (measured, the same digits in every run at
+load 1-7: 1.9e-4 rad, fingers of movements 26 and 51; 7.1e-5 rad, pro_sup of movement 1).
+PD alone (--no-feedforward) misses by 0.74-0.94 rad (real time, load 11): the bound is on
+what the feed-forward does.
 """
 
 from __future__ import annotations
@@ -50,12 +53,25 @@ def test_closed_loop_example_tracks_three_movements(tmp_path, procs) -> None:
     assert "Traceback" not in proc.stderr
     res = json.loads((out / "results.json").read_text())
     assert [m["id"] for m in res["movements"]] == [1, 26, 51], proc.stdout
+    problems = []
     for m in res["movements"]:
         rms = m["rms_rad"]
-        assert m["samples"] > 500, m["samples"]  # ~1000 states after the hold
-        assert max(rms.values()) <= 1e-2, (m["id"], max(rms, key=rms.get), proc.stdout)
-        for j in ("elbow_flexion", "pro_sup", "wrist_flexion", "wrist_deviation"):
-            assert rms[j] <= 5e-3, (m["id"], j, rms[j], proc.stdout)
-    assert res["loop_latency_ms"] is not None
-    assert res["stale_steps"] <= 0.01 * res["steps"], proc.stdout  # the loop ran in step
+        worst = max(rms, key=rms.get)
+        if m["samples"] <= 500:  # ~1000 states after the hold
+            problems.append(f"movement {m['id']}: {m['samples']} states after the hold")
+        # the loop ran in step: every step after the hold had the reference of its time
+        if m["steps_behind"]:
+            problems.append(f"movement {m['id']}: {m['steps_behind']} step(s) without the "
+                            f"reference of their time")
+        if rms[worst] > 1e-2:
+            problems.append(f"movement {m['id']}: {worst} RMS {rms[worst]:.3g} rad > 1e-2")
+        problems += [f"movement {m['id']}: {j} RMS {rms[j]:.3g} rad > 5e-3"
+                     for j in ("elbow_flexion", "pro_sup", "wrist_flexion", "wrist_deviation")
+                     if rms[j] > 5e-3]
+    if res["loop_latency_ms"] is None:
+        problems.append("no command came back applied")
+    if res["stale_steps"] > 0.01 * res["steps"]:
+        problems.append(f"{res['stale_steps']} of {res['steps']} steps waited out WAIT_S")
+    # the whole output (an assert's tuple message is cut short)
+    assert not problems, "\n".join(problems) + "\n" + proc.stdout + proc.stderr[-3000:]
     print(proc.stdout)

@@ -75,4 +75,5 @@ def test_launch_files_installed_as_data(install):
         tree = ast.parse((install / "share" / "forearm_dynamics" / "launch" / name).read_text())
         assert "generate_launch_description" in {f.name for f in tree.body
                                                  if isinstance(f, ast.FunctionDef)}, name
-    assert (install / "share" / "forearm_dynamics" / "examples" / "closed_loop.py").is_file()
+    for example in ("closed_loop.py", "closed_loop_report.py"):  # the launch file runs the first
+        assert (install / "share" / "forearm_dynamics" / "examples" / example).is_file()
