@@ -114,7 +114,8 @@ class Controller:
         self.stale_steps = 0  # lockstep: steps taken without the reference of their time
         self.movements, self.gap_ns = movements, round(gap_s * 1e9)
         self.next_start: int | None = None  # lockstep: when the next movement is due (sim ns)
-        self.steps_ref: list[tuple[int, int]] = []  # lockstep: (state stamp, reference stamp) per step
+        #: lockstep, per step: state stamp, reference stamp, 1 if it waited out WAIT_S
+        self.steps_ref: list[tuple[int, int, int]] = []
         self.sim_t0_ns: int | None = None
         w = OMEGA[lockstep]
         self.kp, self.kd = w**2, 2 * ZETA * w
@@ -214,10 +215,10 @@ class Controller:
             return
         self.step()
 
-    def step(self) -> None:
+    def step(self, stale: bool = False) -> None:
         self.waiting_since = None
         self.outstanding = True
-        self.steps_ref.append((self.t, self.ref_t))
+        self.steps_ref.append((self.t, self.ref_t, int(stale)))
         self.command()
 
     def on_wait_timer(self) -> None:
@@ -226,7 +227,7 @@ class Controller:
         if (self.lockstep and not self.outstanding and self.waiting_since is not None
                 and time.monotonic() - self.waiting_since > WAIT_S):
             self.stale_steps += 1
-            self.step()
+            self.step(stale=True)
 
     def command(self) -> None:
         q, qd = self.q, self.qd
