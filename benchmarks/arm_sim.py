@@ -54,37 +54,10 @@ from benchmarks.stats import (
 )
 from forearm_dynamics import JOINT_NAMES
 from forearm_dynamics.codec.jointstate_cdr import STAMP, OutputTemplate
+from forearm_dynamics.nodes.peer import Peer
 from forearm_dynamics.processes import Child, ros_env
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-class Peer:
-    """This process's rclpy node on the benchmark's domain (EventsExecutor)."""
-
-    def __init__(self, domain: int):
-        import rclpy
-        from rclpy.experimental import EventsExecutor
-
-        self.rclpy = rclpy
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node("arm_sim_bench", context=self.context)
-        self.executor = EventsExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def spin_for(self, seconds: float) -> None:
-        from rclpy.task import Future
-
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_until_future_complete(Future(), timeout_sec=min(0.2, end - time.monotonic()))
-
-    def close(self) -> None:
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown()  # else it keeps the node in the graph
-        self.context.try_shutdown()
 
 
 def _stream_stats(recv_ns: list[int]) -> dict:
@@ -106,7 +79,7 @@ def realtime(env, logs: Path, seconds: float) -> dict:
         "-p", "output_topic:=baseline/joint_states", "-p", "marker_topic:=baseline/movement",
         "-p", "loop:=true", "-p", "start_delay:=0.3", "-p", "min_subscribers:=1",
         "-p", "movements:=[1, 2, 3, 4, 5]"], env, logs)
-    peer = Peer(int(env["ROS_DOMAIN_ID"]))
+    peer = Peer("arm_sim_bench", int(env["ROS_DOMAIN_ID"]))
     recv = {"arm_sim": [], "baseline": []}
     stamps: list[int] = []
     stamp_of = STAMP.unpack_from
@@ -162,7 +135,7 @@ def pingpong(env, logs: Path, seconds: float, node_name: str) -> dict:
     else:
         child = Child.script("null_echo_node", [], env, logs)
         in_topic, out_topic = "joint_states", "joint_torques"
-    peer = Peer(int(env["ROS_DOMAIN_ID"]))
+    peer = Peer("arm_sim_bench", int(env["ROS_DOMAIN_ID"]))
     node = peer.node
     qos = stream_qos(1000)
     msg = OutputTemplate(JOINT_NAMES)

@@ -60,6 +60,7 @@ if __package__ in (None, ""):  # `python benchmarks/torque_node_rate.py` from th
 from benchmarks.procstat import proc_stat
 from benchmarks.stats import claim_domain_arg, loadavg, machine_info, percentiles, save_sections
 from forearm_dynamics.exit_codes import DATA, OK
+from forearm_dynamics.nodes.peer import Peer
 from forearm_dynamics.processes import Child, ros_env
 
 MS = 1_000_000
@@ -71,35 +72,6 @@ SWITCHES = [
     {"payload_mass": 0.0},
 ]
 SWITCH_WINDOW_MS = 300
-
-
-class Peer:
-    """This process's ROS side: one node spun by a background thread."""
-
-    def __init__(self, domain: int):
-        import rclpy
-        from rclpy.experimental import EventsExecutor
-
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node("rate_bench", context=self.context)
-        self.executor = EventsExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._stop = False
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while not self._stop and self.context.ok():
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self) -> None:
-        self._stop = True
-        self._thread.join(timeout=5)
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown()  # else it keeps the node in the graph
-        self.context.try_shutdown()
 
 
 def wait_until(predicate, timeout: float) -> bool:
@@ -166,7 +138,8 @@ def measure_rate(domain: int, work: Path, seconds: float) -> dict:
 
     child = _start_node("torque_node_rate", ["-p", f"output_rate_hz:={RATE_HZ}", "-p",
                                              "input_timeout:=0.2"], domain, work)
-    peer = Peer(domain)
+    peer = Peer("rate_bench", domain)
+    peer.spin_in_background()
     raw: list[tuple[int, bytes]] = []
     try:
         node = peer.node
@@ -231,7 +204,8 @@ def measure_switch(domain: int, work: Path, seconds: float) -> dict:
     # the model in force at its stamp (the switch is what is measured, not the estimator)
     child = _start_node("torque_node_switch", ["-p", "diagnostics_period:=0.5",
                                                "-p", "estimator:=backward"], domain, work)
-    peer = Peer(domain)
+    peer = Peer("rate_bench", domain)
+    peer.spin_in_background()
     raw: list[tuple[int, bytes]] = []
     configs: list[tuple[int, dict]] = []
     asked: list[tuple[int, dict, object]] = []

@@ -20,6 +20,7 @@ from importlib.metadata import entry_points
 from pathlib import Path
 
 from forearm_dynamics import processes
+from forearm_dynamics.nodes.peer import Peer as _Peer
 from forearm_dynamics.processes import BIN, Child, DomainLease, lease_domain
 
 __all__ = [
@@ -207,37 +208,14 @@ class Procs:
                 proc.wait(timeout=10)
 
 
-class Peer:
-    """An rclpy node inside the test process, on the same private domain as the children.
-
-    It has its own Context, so several peers (and other test files) never share state.
-    """
+class Peer(_Peer):
+    """An rclpy node inside the test process, on the same private domain as the children
+    (forearm_dynamics.nodes.peer.Peer: its own Context, closed for good by close()); open
+    ones are closed by release_test_domains() at the latest."""
 
     def __init__(self, name: str = "test_peer", domain: int | None = None):
-        import rclpy
-        from rclpy.experimental import EventsExecutor
-
-        self.context = rclpy.Context()
-        self.domain = domain if domain is not None else domain_id()
-        rclpy.init(context=self.context, domain_id=self.domain)
-        self.node = rclpy.create_node(name, context=self.context)
-        self.executor = EventsExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__(name, domain if domain is not None else domain_id())
         _open_peers.append(self)
-
-    def spin_for(self, seconds: float) -> None:
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
-
-    def spin_until(self, predicate, timeout: float = 10.0) -> bool:
-        """Spin until predicate() is true; False on timeout."""
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > deadline:
-                return False
-            self.executor.spin_once(timeout_sec=0.02)
-        return True
 
     def endpoints(self, topic: str) -> str:
         """Who publishes and subscribes `topic` as this peer sees the graph, and whether its
@@ -259,13 +237,6 @@ class Peer:
                 f"{sorted(full(ns, n) for n, ns in node.get_node_names_and_namespaces())}")
 
     def close(self) -> None:
-        """Leave the graph now. The EventsExecutor must be shut down too: until then it holds
-        the node's handle, destroy_node() only marks it, and the node and its endpoints stay
-        discoverable for as long as this process lives (test_processes)."""
-        if self not in _open_peers:
-            return
-        _open_peers.remove(self)
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown()
-        self.context.try_shutdown()
+        if self in _open_peers:
+            _open_peers.remove(self)
+        super().close()

@@ -184,6 +184,39 @@ def test_a_closed_peer_leaves_the_graph_and_a_released_domain_closes_its_peers()
         rosproc.release_test_domains()
 
 
+def test_a_peer_spun_in_the_background_receives_and_its_close_ends_the_thread() -> None:
+    """forearm_dynamics.nodes.peer.Peer.spin_in_background (the benchmarks' way): a message
+    reaches its callback while the caller does nothing but wait, and close() ends the spin
+    thread and leaves the graph (the base class of the tests' Peer above)."""
+    import rosproc
+
+    from forearm_dynamics.nodes.peer import Peer
+
+    domain = rosproc.test_domain(102, 139)
+    got: list[JointState] = []
+    sender = rosproc.Peer("sender_peer", domain=domain)
+    background = Peer("background_peer", domain)
+    try:
+        background.node.create_subscription(JointState, "joint_states", got.append, 10)
+        background.spin_in_background()
+        pub = sender.node.create_publisher(JointState, "joint_states", 10)
+        assert sender.spin_until(lambda: pub.get_subscription_count() == 1, rosproc.STARTUP_S)
+        deadline = time.monotonic() + rosproc.STARTUP_S  # a hang guard
+        while not got and time.monotonic() < deadline:
+            pub.publish(JointState(name=["a"], position=[1.0]))
+            time.sleep(0.1)  # this thread never spins the background peer
+        assert got and list(got[0].name) == ["a"]
+        thread = background._thread
+        background.close()
+        assert not thread.is_alive() and background.closed
+        background.close()  # a second close does nothing
+        assert sender.spin_until(lambda: "background_peer" not in _node_names(sender), 30.0)
+    finally:
+        background.close()
+        sender.close()
+        rosproc.release_test_domains()
+
+
 def test_start_wait_for_and_stop(tmp_path) -> None:
     a, b = sleeper(tmp_path), sleeper(tmp_path, split=True)
     try:
