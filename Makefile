@@ -22,7 +22,7 @@ browser:
 	  'apt-get $(APT_WAIT) update -qq && apt-get $(APT_WAIT) install -y -qq chromium >/dev/null'; } || \
 	  echo "warning: chromium is missing (test_html_report needs it): apt-get install chromium" >&2
 
-$(VENV)/.installed: setup.py setup.cfg .ci/requirements.lock forearm_dynamics/estimation/_kalman_step.c forearm_dynamics/estimation/_practice_step.c forearm_dynamics/estimation/_kalman_step.h forearm_dynamics/estimation/_buffers.h forearm_dynamics/estimation/_noise_step.c forearm_dynamics/estimation/_noise_evaluations.c forearm_dynamics/estimation/_noise_step.h forearm_dynamics/muscles/_muscle_step.c
+$(VENV)/.installed: setup.py setup.cfg .ci/requirements.lock forearm_dynamics/estimation/_kalman_step.c forearm_dynamics/estimation/_practice_step.c forearm_dynamics/estimation/_kalman_step.h forearm_dynamics/_buffers.h forearm_dynamics/estimation/_noise_step.c forearm_dynamics/estimation/_noise_evaluations.c forearm_dynamics/estimation/_noise_step.h forearm_dynamics/muscles/_muscle_step.c
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --disable-pip-version-check --upgrade "pip==25.3"
 	$(PY) -m pip install -q --disable-pip-version-check -c .ci/requirements.lock -e ".[$(EXTRAS)]"

@@ -29,6 +29,10 @@ EXECUTABLES = {
     "bag_muscles": "forearm_dynamics.cli.bag_muscles:main",
 }
 
+# What the three extensions share for a call on arrays (get_vector, bound_call): one header,
+# on their include path.
+BUFFERS = f"{PACKAGE}/_buffers.h"
+
 # The Kalman filter's per-sample arithmetic in C (estimation/kalman_step.py says why), and its
 # practice filter's (estimation/practice_step.py);
 # optional: without a C compiler the install goes on and the filter runs numpy's way.
@@ -36,8 +40,8 @@ EXECUTABLES = {
 KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
                         [f"{PACKAGE}/estimation/_kalman_step.c",
                          f"{PACKAGE}/estimation/_practice_step.c"],
-                        depends=[f"{PACKAGE}/estimation/_kalman_step.h",
-                                 f"{PACKAGE}/estimation/_buffers.h"],
+                        depends=[f"{PACKAGE}/estimation/_kalman_step.h", BUFFERS],
+                        include_dirs=[PACKAGE],
                         extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 # The noise estimator's per-sample store in C (estimation/noise_step.py says why); optional
@@ -45,13 +49,14 @@ KALMAN_STEP = Extension(f"{PACKAGE}.estimation._kalman_step",
 NOISE_STEP = Extension(f"{PACKAGE}.estimation._noise_step",
                        [f"{PACKAGE}/estimation/_noise_step.c",
                         f"{PACKAGE}/estimation/_noise_evaluations.c"],
-                       depends=[f"{PACKAGE}/estimation/_noise_step.h",
-                                f"{PACKAGE}/estimation/_buffers.h"],
+                       depends=[f"{PACKAGE}/estimation/_noise_step.h", BUFFERS],
+                       include_dirs=[PACKAGE],
                        extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 # The muscle node's arithmetic around the QP in C (muscles/muscle_step.py says why); optional
 # in the same way.
 MUSCLE_STEP = Extension(f"{PACKAGE}.muscles._muscle_step", [f"{PACKAGE}/muscles/_muscle_step.c"],
+                        depends=[BUFFERS], include_dirs=[PACKAGE],
                         extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
 
 setup(

@@ -82,10 +82,10 @@ static PyObject *Step_predict_innovate(Step *self, PyObject *const *args, Py_ssi
         return NULL;
     const Py_ssize_t n = self->n;
     Py_buffer qb, qdb;
-    if (get_vector(args[0], n, &qb, "q") < 0)
+    if (get_vector(args[0], n, &qb, "q", 0) < 0)
         return NULL;
     const int vel = args[1] != Py_None;
-    if (vel && get_vector(args[1], n, &qdb, "qd") < 0) {
+    if (vel && get_vector(args[1], n, &qdb, "qd", 0) < 0) {
         PyBuffer_Release(&qb);
         return NULL;
     }
@@ -125,7 +125,7 @@ static PyObject *Step_correct(Step *self, PyObject *const *args, Py_ssize_t narg
     for (int k = 0; k < 2; k++) {
         if (args[1 + k] == Py_None)
             continue;
-        if (get_vector(args[1 + k], n, &keep[k], k ? "qd" : "q") < 0) {
+        if (get_vector(args[1 + k], n, &keep[k], k ? "qd" : "q", 0) < 0) {
             if (kept)
                 PyBuffer_Release(&keep[0]);
             return NULL;

@@ -110,10 +110,10 @@ static PyObject *Store_store(Store *self, PyObject *const *args, Py_ssize_t narg
     if (!c[STARTED] || !c[HAS_LAST] || r[DT] == 0.0 || c[CAP] != ring || ring == 0)
         return PyLong_FromLong(NOT_STORED);
     Py_buffer qb, qdb;
-    if (get_vector(args[1], n, &qb, "q") < 0)
+    if (get_vector(args[1], n, &qb, "q", 0) < 0)
         return NULL;
     const int vel = args[2] != Py_None;
-    if (vel && get_vector(args[2], n, &qdb, "qd") < 0) {
+    if (vel && get_vector(args[2], n, &qdb, "qd", 0) < 0) {
         PyBuffer_Release(&qb);
         return NULL;
     }

@@ -134,7 +134,7 @@ static PyObject *Practice_push(Practice *self, PyObject *const *args, Py_ssize_t
     if (t_ns == -1 && PyErr_Occurred())
         return NULL;
     Py_buffer qb;
-    if (get_vector(args[1], self->n, &qb, "q") < 0)
+    if (get_vector(args[1], self->n, &qb, "q", 0) < 0)
         return NULL;
     const double *q = qb.buf;
     double *last = BUF(P_LAST);
@@ -212,7 +212,7 @@ static PyObject *Practice_output(Practice *self, PyObject *const *args, Py_ssize
     if (dt == -1.0 && PyErr_Occurred())
         return NULL;
     Py_buffer qb;
-    if (get_vector(args[1], self->n, &qb, "q") < 0)
+    if (get_vector(args[1], self->n, &qb, "q", 0) < 0)
         return NULL;
     const Py_ssize_t n = self->n, K = self->K;
     const int64_t count = CTR(P_FCTR)[F_COUNT];

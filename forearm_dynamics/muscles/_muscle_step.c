@@ -20,6 +20,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "_buffers.h" /* get_vector, bound_call */
+
 #define NJ 20
 enum {
     CENTER, INV_HALF, VARIABLES, OUT, PA, PB, INDPTR, INDICES, DATA, ROWS, /* the surrogate */
@@ -159,32 +161,8 @@ static int Step_init(Step *self, PyObject *args, PyObject *kwds) {
     return 0;
 }
 
-/* A vector argument of n float64 values, contiguous; aligned or not. */
-static int get_vector(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *what, int flags) {
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | flags) < 0)
-        return -1;
-    if (!is_float64(view) || view->len != n * 8) {
-        PyErr_Format(PyExc_ValueError, "%s: a contiguous float64 array of %zd values", what, n);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
-
-static int bound(Step *self, Py_ssize_t nargs, Py_ssize_t expected, const char *usage) {
-    if (self->held != N_BUFS) {
-        PyErr_SetString(PyExc_RuntimeError, "Step is not bound to its arrays");
-        return 0;
-    }
-    if (nargs != expected) {
-        PyErr_SetString(PyExc_TypeError, usage);
-        return 0;
-    }
-    return 1;
-}
-
 static PyObject *Step_problem(Step *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (!bound(self, nargs, 3, "problem(q, qd, tau)"))
+    if (!bound_call(self->held, N_BUFS, "Step", nargs, 3, "problem(q, qd, tau)"))
         return NULL;
     Py_buffer in[3];
     static const char *what[] = {"q", "qd", "tau"};
@@ -290,7 +268,8 @@ static PyObject *Step_problem(Step *self, PyObject *const *args, Py_ssize_t narg
 }
 
 static PyObject *Step_finish(Step *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (!bound(self, nargs, 4, "finish(x, activations, forces, reserves)"))
+    if (!bound_call(self->held, N_BUFS, "Step", nargs, 4,
+                    "finish(x, activations, forces, reserves)"))
         return NULL;
     const Py_ssize_t n = self->n;
     Py_buffer xb, ob[3];
