@@ -102,7 +102,7 @@ class Controller:
     """Computed torque: feed-forward from torque_node + PD on arm_sim's state."""
 
     def __init__(self, node, arm, start_posture: np.ndarray, feedforward: bool = True,
-                 lockstep: bool = False, movements: int = 1, gap_s: float = GAP_S):
+                 lockstep: bool = False, movements: int = 1, gap_s: float | None = GAP_S):
         self.model, self.data = arm.model, arm.model.createData()
         self.lockstep = lockstep
         self.q = start_posture.copy()  # the newest state
@@ -112,7 +112,9 @@ class Controller:
         self.outstanding = False  # lockstep: a command sent, its state not yet back
         self.waiting_since: float | None = None  # lockstep: waiting for the reference
         self.stale_steps = 0  # lockstep: steps taken without the reference of their time
-        self.movements, self.gap_ns = movements, round(gap_s * 1e9)
+        #: the playlist's length and gap, to predict the next start (None: not known)
+        self.movements = movements
+        self.gap_ns = None if gap_s is None else round(gap_s * 1e9)
         self.next_start: int | None = None  # lockstep: when the next movement is due (sim ns)
         #: lockstep, per step: state stamp, reference stamp, 1 if it waited out WAIT_S
         self.steps_ref: list[tuple[int, int, int]] = []
@@ -161,13 +163,14 @@ class Controller:
         """A movement started; in lockstep also: when the next one is due. trajectory_publisher
         starts it gap s after this one's last sample, at the first clock tick not earlier:
         the controller stops there until its reference comes, so the arm never runs into a
-        movement whose marker is late (in a CI run one came only after the movement had
-        played: the arm tracked a reference ~0.1 s old, 0.17 rad off; the steps were
-        counted by nothing)."""
+        movement whose marker is late. (Before, it stepped at once until the marker came:
+        a CI run tracked movement 26's fingers 0.17 rad off, as a reference ~0.1 s old
+        would, and nothing counted those steps; a marker held back 3 s reproduces the
+        mechanism.) --attach: the gap is the launch file's, not predicted."""
         m = json.loads(msg.data)
         m["seen_at_ns"] = self.t  # the simulated time it arrived at (lockstep: how late)
         self.markers.append(m)
-        if m["index"] + 1 < self.movements:
+        if m["index"] + 1 < self.movements and self.gap_ns is not None:
             self.next_start = (m["t0_ns"] + m["samples"] * round(1e9 / m["rate_hz"])
                                + self.gap_ns)
         else:
@@ -297,7 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     rclpy.init()
     node = rclpy.create_node("closed_loop_controller")
     ctrl = Controller(node, build_model("segmented", 50), start, not args.no_feedforward,
-                      args.lockstep, len(movements))
+                      args.lockstep, len(movements),
+                      None if args.attach else GAP_S)  # --attach: the launch file's gap
     executor = EventsExecutor()
     executor.add_node(node)
 
