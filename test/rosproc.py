@@ -178,12 +178,10 @@ class NodeProcess(Child):
             raise Hang(exc.cmd, exc.timeout, output=exc.output) from None
 
 
-def start(executable: str, *ros_args: str, domain: int | None = None,
-          env: dict[str, str] | None = None) -> NodeProcess:
-    """Start a console script of this venv with `--ros-args *ros_args` (if any); `env`: more
-    environment on top of ros_env's (e.g. the DDS transports)."""
-    return NodeProcess.script(executable, list(ros_args), {**ros_env(domain), **(env or {})},
-                              _LOG_DIR, split_stderr=True)
+def start(executable: str, *ros_args: str, domain: int | None = None) -> NodeProcess:
+    """Start a console script of this venv with `--ros-args *ros_args` (if any)."""
+    return NodeProcess.script(executable, list(ros_args), ros_env(domain), _LOG_DIR,
+                              split_stderr=True)
 
 
 class Procs:
@@ -199,9 +197,8 @@ class Procs:
         self.items.append(p)
         return p
 
-    def start(self, executable: str, *ros_args: str, domain: int | None = None,
-              env: dict[str, str] | None = None) -> NodeProcess:
-        return self.add(start(executable, *ros_args, domain=domain, env=env))
+    def start(self, executable: str, *ros_args: str, domain: int | None = None) -> NodeProcess:
+        return self.add(start(executable, *ros_args, domain=domain))
 
     def close(self) -> None:
         for p in self.items:

@@ -58,15 +58,6 @@ EXACT = ("-p", "estimator:=backward")
 #: not what these tests are about: process faults.
 DEPTH = ("-p", "qos_depth:=10000")
 NODE_ARGS = ("-p", "diagnostics_period:=0.5", *DEPTH, *EXACT)
-#: Every process of these tests talks UDPv4 only (the in-process Watch, never killed, keeps
-#: Fast DDS's default and meets them there). With the default shared-memory transport a
-#: torque_node restarted after kill -9 was twice (each time beside a second suite) matched
-#: with the publisher, as it logged, yet received nothing in 120 s (its /diagnostics:
-#: received_total 0, over 120 000 samples passing to the recorder and the watch meanwhile):
-#: Fast DDS's shared-memory port of a killed process, reused by its successor
-#: (eProsima/Fast-DDS#5053, #5469), not what these tests are about. docs/reliability.md
-#: tells users the same.
-UDP = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 #: min_subscribers 3: torque_node, the recorder and the Watch all read joint_states (with 2
 #: the publisher streamed once the recorder and the watch matched, 1.2 s before the node did)
 #: drain 30 s: stopped, the publisher waits (at most that) until its last samples are
@@ -200,13 +191,13 @@ def torques_matched(node, rec) -> None:
 
 
 def start_pipeline(procs: Procs, tmp: Path, domain: int):
-    node = procs.start("torque_node", *NODE_ARGS, domain=domain, env=UDP)
-    rec = procs.start("bag_recorder", "-p", f"output:={tmp / 'run.mcap'}", *DEPTH, domain=domain, env=UDP)
+    node = procs.start("torque_node", *NODE_ARGS, domain=domain)
+    rec = procs.start("bag_recorder", "-p", f"output:={tmp / 'run.mcap'}", *DEPTH, domain=domain)
     # start-up is imports and a model build: seconds, tens of seconds at load 11 (hang guard)
     assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
     assert rec.wait_for_output("recording", rosproc.STARTUP_S), rec.output()
     torques_matched(node, rec)
-    pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain, env=UDP)
+    pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain)
     return node, rec, pub
 
 
@@ -223,7 +214,7 @@ def test_publisher_killed_and_restarted(procs, tmp_path) -> None:
         n_down = len(watch.torques)
         watch.peer.spin_for(0.5)
         assert len(watch.torques) == n_down and node.running()  # alive, idle, not spinning on
-        pub2 = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain, env=UDP)
+        pub2 = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain)
         watch.wait_torques(1500)
         diag = watch.diag.fresh()
         assert pub2.stop(signal.SIGINT) == 0, pub2.output()
@@ -299,7 +290,7 @@ def test_torque_node_killed_and_restarted(procs, tmp_path) -> None:
         assert node.wait(10) == -signal.SIGKILL
         t_kill = time.time_ns()
         watch.peer.spin_for(1.0)
-        node2 = procs.start("torque_node", *NODE_ARGS, domain=domain, env=UDP)
+        node2 = procs.start("torque_node", *NODE_ARGS, domain=domain)
         # up first (its start-up alone took > 40 s at load 11 in a full run: the old single
         # 40 s wait failed there with 0 torques), then serving
         assert node2.wait_for_output("config on", rosproc.STARTUP_S), node2.output()
@@ -431,13 +422,13 @@ def test_recorder_stopped_at_random_points(procs, tmp_path) -> None:
     domain = private_domain()
     watch = Watch(domain)
     try:
-        node = procs.start("torque_node", *DEPTH, *EXACT, domain=domain, env=UDP)
+        node = procs.start("torque_node", *DEPTH, *EXACT, domain=domain)
         ref_path = tmp_path / "reference.mcap"
-        ref = procs.start("bag_recorder", "-p", f"output:={ref_path}", *DEPTH, domain=domain, env=UDP)
+        ref = procs.start("bag_recorder", "-p", f"output:={ref_path}", *DEPTH, domain=domain)
         assert node.wait_for_output("config on", rosproc.STARTUP_S), node.output()
         assert ref.wait_for_output("recording", rosproc.STARTUP_S), ref.output()
         torques_matched(node, ref)  # the reference holds the node's first answer
-        pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain, env=UDP)
+        pub = procs.start("trajectory_publisher", *PUBLISHER_ARGS, domain=domain)
         watch.wait_torques(300)  # the pipeline runs before the recorders under test join
     finally:
         watch.close()
@@ -445,7 +436,7 @@ def test_recorder_stopped_at_random_points(procs, tmp_path) -> None:
     for k, (sig, phase, delay) in enumerate(plan):
         path = tmp_path / f"rec{k}.mcap"
         rec = procs.start("bag_recorder", "-p", f"output:={path}", *DEPTH,
-                          "--log-level", "bag_recorder:=debug", domain=domain, env=UDP)
+                          "--log-level", "bag_recorder:=debug", domain=domain)
         started.append((rec, path, sig, phase, delay))
         if phase == "start-up":  # the file exists, subscriptions are being made
             deadline = time.monotonic() + 30
