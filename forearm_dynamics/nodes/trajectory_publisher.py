@@ -50,7 +50,7 @@ from ..description import JOINT_NAMES
 from ..exit_codes import OK
 from ..movements import Movement, get_movement, movement_library
 from ..shoulder import CONVENTIONS, SHOULDER_CHOICES, synthetic_shoulder_motion
-from .common import EXECUTORS, latched_qos, main_for, stream_qos
+from .common import EXECUTORS, MATCH_POLL_S, MatchLog, latched_qos, main_for, stream_qos
 from .params import ParameterError, Params, Spec, init_node
 
 #: Samples one late tick may catch up (0.5 s at 1 kHz, within the default depth of 1000);
@@ -211,6 +211,12 @@ class TrajectoryPublisher(Node):
         self.sent = 0
         self.skipped = 0
         self.timer = self.create_timer(1.0 / s.rate_hz, self._tick)
+        # the writer's own count of readers, logged on each change (common.MatchLog): the
+        # side of a match a reader's log cannot show (docs/reliability.md, restarts)
+        topic = self.pub.topic_name
+        self.create_timer(MATCH_POLL_S, MatchLog(
+            self, self.pub.get_subscription_count,
+            lambda n: f"{topic}: matched by {n} subscriber(s)"))
         total = sum(m.duration for m in s.movements)
         self.get_logger().info(
             f"{len(s.movements)} movement(s), {total:.1f} s at {s.rate_hz:g} Hz on "
