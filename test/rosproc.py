@@ -11,6 +11,7 @@ import atexit
 import functools
 import itertools
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -97,6 +98,21 @@ STARTUP_S = 180.0
 _LOG_DIR = Path(tempfile.mkdtemp(prefix="forearm_test_roslog_"))
 if not os.environ.get("KEEP_ROS_TEST_LOGS"):  # node output is read during the test itself
     atexit.register(shutil.rmtree, _LOG_DIR, ignore_errors=True)
+
+
+#: A line Fast DDS's shared-memory transport logs on its own, in colour: "[RTPS_TRANSPORT_SHM
+#: Error] Failed init_port fastrtps_port7003: open_and_lock_file failed". Its ports for
+#: discovery (7000 and up) are numbered machine-wide, not per domain, so participants of
+#: two sessions can race for one; the loser takes the next (a refused-parameter test beside
+#: a second suite found this line before the node's one).
+_FASTDDS_SHM_LOG = re.compile(r"\[RTPS_TRANSPORT_SHM (Error|Warning)\]")
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def own_lines(text: str) -> list[str]:
+    """The non-empty lines of a process's output, without Fast DDS's shared-memory log."""
+    return [ln for ln in text.splitlines()
+            if ln.strip() and not _FASTDDS_SHM_LOG.search(_ANSI.sub("", ln))]
 
 
 def ros_env(domain: int | None = None) -> dict[str, str]:

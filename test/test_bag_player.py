@@ -16,7 +16,7 @@ from bagkit import DOMAIN, MS, NS, write_stream_bag
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from rosproc import BIN, Peer, ros_env
+from rosproc import BIN, Peer, own_lines, ros_env
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -260,7 +260,7 @@ def test_bad_bags_one_line_exit_2(tmp_path, bag, kind):
     r = subprocess.run([str(BIN / "bag_player"), str(path), *args], env=ros_env(DOMAIN), capture_output=True,
                        text=True, timeout=60, check=False)
     assert r.returncode == 2, r.stdout + r.stderr
-    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    lines = own_lines(r.stderr)
     assert len(lines) == 1, r.stderr
     assert "Traceback" not in r.stderr + r.stdout
     if kind == "garbage":

@@ -240,7 +240,7 @@ REFUSAL_TIMEOUT_S = 180.0
 def _judge(node: str, args: list[str], name: str, p: rosproc.NodeProcess) -> str:
     code = p.wait(timeout=REFUSAL_TIMEOUT_S)
     out = p.output()
-    lines = [ln for ln in out.splitlines() if ln.strip()]
+    lines = rosproc.own_lines(out)
     assert code == 2, (node, args, out)
     assert "Traceback" not in out, out
     # one line of ours; rcl prints one more of its own when it cannot parse the override
