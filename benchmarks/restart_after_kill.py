@@ -33,7 +33,7 @@ if str(ROOT) not in sys.path:
 
 from forearm_dynamics.nodes.common import stream_qos  # noqa: E402
 from forearm_dynamics.nodes.peer import Peer  # noqa: E402
-from forearm_dynamics.processes import Child, claim_domain, ros_env  # noqa: E402
+from forearm_dynamics.processes import Child, claim_domain, ros_env, rtps_port  # noqa: E402
 
 WAIT_S = 60.0
 SHM_DIR = Path("/dev/shm")  # noqa: S108 - Fast DDS's files there, only read
@@ -64,19 +64,21 @@ def main(argv: list[str] | None = None) -> int:
     node = Child.script("torque_node", NODE_ARGS, env, logs)
     pub = Child.script("trajectory_publisher", ["-p", "movements:=[1, 28, 53]", "-p", "loop:=true",
                                                 "-p", "min_subscribers:=2"], env, logs)
-    deaf: list[tuple[int, float]] = []  # (cycle, s from launch to its data port's making)
-    served_after: list[tuple[int, float]] = []
+    # restarts: (cycle, s from launch to the making of a data port), deaf or served
+    deaf: list[tuple[int, float]] = []
+    served: list[tuple[int, float]] = []
     placeholders: list[Peer] = []
     launched = time.time()
     try:
         for cycle in range(args.cycles + 1):  # cycle 0: the first node; then each restart
             start = got[0]
-            served = peer.spin_until(lambda start=start: got[0] >= start + NEW, WAIT_S)
+            heard = peer.spin_until(lambda start=start: got[0] >= start + NEW, WAIT_S)
             made = _data_port_made_after(lease.domain, launched)
             print(f"node {cycle} ({'first' if cycle == 0 else 'restarted'}): "
-                  f"{got[0] - start} torques{'' if served else f' in {WAIT_S:g} s: DEAF'}; "
+                  f"{got[0] - start} torques{'' if heard else f' in {WAIT_S:g} s: DEAF'}; "
                   f"a data port made {made:.1f} s after its launch", flush=True)
-            (deaf if not served else served_after).append((cycle, round(made, 1)))
+            if cycle > 0:
+                (served if heard else deaf).append((cycle, round(made, 1)))
             if cycle == args.cycles:
                 break
             node.proc.send_signal(signal.SIGKILL)
@@ -93,27 +95,26 @@ def main(argv: list[str] | None = None) -> int:
             p.close()
         peer.close()
         lease.release()
-    restarts = served_after[1:] if served_after and served_after[0][0] == 0 else served_after
-    made = [d for _, d in restarts if not math.isnan(d)]
+    made = [d for _, d in served if not math.isnan(d)]
     print(f"{'fresh ids' if args.fresh_id else 'ids as Fast DDS picks them'}: {len(deaf)} of "
           f"{args.cycles} restarted nodes served nothing in {WAIT_S:g} s ((node, s to its data "
           f"port) {deaf}); of those that served, {len(made)} made their data port "
           f"{min(made, default=math.nan):.1f}-{max(made, default=math.nan):.1f} s after launch "
-          f"and {len(restarts) - len(made)} made none (took one over); logs in {logs}; load "
+          f"and {len(served) - len(made)} made none (took one over); logs in {logs}; load "
           f"average {os.getloadavg()[0]:.1f} (2 cores)")
     return 0
 
 
 def _data_port_made_after(domain: int, t: float) -> float:
     """Seconds from `t` to the newest making of a user-data shared-memory port of this
-    domain (Fast DDS names its mutex sem.fastrtps_port<N>_mutex in /dev/shm, N = 7400 +
-    250·domain + 11 + 2·participant id); NaN if none was made after `t`. A participant makes
-    its port as it starts, unless it takes over one it finds in use (every deaf restart
-    measured did: docs/reliability.md)."""
-    base, newest = 7400 + 250 * domain + 11, float("nan")
+    domain (Fast DDS names its mutex sem.fastrtps_port<N>_mutex in /dev/shm, N the
+    participant's user-data port: processes.rtps_port); NaN if none was made after `t`. A
+    participant makes its port as it starts, unless it takes over one it finds in use
+    (every deaf restart measured did: docs/reliability.md)."""
+    data_ports, newest = {rtps_port(domain, p, user=True) for p in range(32)}, float("nan")
     for path in SHM_DIR.glob("sem.fastrtps_port*_mutex"):
         port = int(path.name.removeprefix("sem.fastrtps_port").removesuffix("_mutex"))
-        if base <= port < base + 64 and (port - base) % 2 == 0:
+        if port in data_ports:
             try:
                 made = path.stat().st_ctime - t
             except FileNotFoundError:  # removed since the glob (a port closed)

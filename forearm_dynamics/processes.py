@@ -82,6 +82,18 @@ def ros_env(domain: int, log_dir: Path | str, extra: dict[str, str] | None = Non
     return env
 
 
+def rtps_port(domain: int, participant: int | None = None, user: bool = False) -> int:
+    """A UDP port RTPS listens on (DDS-RTPS 2.x, 9.6.1.1; Fast DDS's defaults PB 7400, DG
+    250, PG 2): discovery multicast PB + DG·domain (participant None), discovery unicast
+    + 10 + PG·participant, user-data unicast (`user`) + 11 + PG·participant. Fast DDS
+    numbers a participant's shared-memory data port (/dev/shm/fastrtps_port<N>) the same
+    as its user-data unicast port."""
+    base = 7400 + 250 * domain
+    if participant is None:
+        return base
+    return base + (11 if user else 10) + 2 * participant
+
+
 @dataclass
 class DomainLease:
     """A ROS domain id held by this process until release() or its exit (the kernel drops an

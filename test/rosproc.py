@@ -101,10 +101,11 @@ if not os.environ.get("KEEP_ROS_TEST_LOGS"):  # node output is read during the t
 
 
 #: A line Fast DDS's shared-memory transport logs on its own, in colour: "[RTPS_TRANSPORT_SHM
-#: Error] Failed init_port fastrtps_port7003: open_and_lock_file failed". Its ports for
-#: discovery (7000 and up) are numbered machine-wide, not per domain, so participants of
-#: two sessions can race for one; the loser takes the next (a refused-parameter test beside
-#: a second suite found this line before the node's one).
+#: Error] Failed init_port fastrtps_port7003: open_and_lock_file failed". Its per-process
+#: ports of 7000 and up (one per process, as the "unique network flow" UDP ports of
+#: test_two_hosts_discovery.FLOW_PORTS) are numbered machine-wide, not per domain, so
+#: processes of two sessions can race for one; the loser takes the next (a refused-parameter
+#: test beside a second suite found this line before the node's one).
 _FASTDDS_SHM_LOG = re.compile(r"\[RTPS_TRANSPORT_SHM (Error|Warning)\]")
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 

@@ -23,7 +23,7 @@ import pytest
 import rosproc
 from support.two_host_replay import replay_in_b
 
-from forearm_dynamics.processes import BIN
+from forearm_dynamics.processes import BIN, rtps_port
 
 pytestmark = pytest.mark.hosts
 
@@ -47,13 +47,12 @@ def host_env(domain: int, log_dir: Path, **extra: str) -> dict[str, str]:
 
 
 def rtps_ports(domain: int, participants: int = PARTICIPANTS, user: bool = True) -> list[int]:
-    """UDP ports RTPS (DDS-RTPS 2.x, 9.6.1.1; Fast DDS's defaults) listens on for a domain:
-    PB 7400, DG 250, PG 2; discovery multicast PB + DG·d, discovery unicast PB + DG·d + 10 +
-    PG·p, user unicast PB + DG·d + 11 + PG·p for participant p (one per ROS process)."""
-    base = 7400 + 250 * domain
-    ports = [base] + [base + 10 + 2 * p for p in range(participants)]
+    """UDP ports RTPS listens on for a domain (processes.rtps_port): discovery multicast,
+    and discovery and (`user`) user-data unicast of participants 0..participants-1 (one per
+    ROS process)."""
+    ports = [rtps_port(domain)] + [rtps_port(domain, p) for p in range(participants)]
     if user:
-        ports += [base + 11 + 2 * p for p in range(participants)]
+        ports += [rtps_port(domain, p, user=True) for p in range(participants)]
     return sorted(ports)
 
 
