@@ -209,10 +209,22 @@ def bag_figures(bag: Path) -> dict:
     bursts = np.split(idx, np.where(np.diff(idx) != 1)[0] + 1) if idx.size else []
     first = s.min() if s.size else np.iinfo(np.int64).max
     return {"torques": int(s.size), "unique": int(np.unique(s).size),
-            "inputs_recorded": int(sent.size), "missing": int(missing.size),
+            "inputs_recorded": int(sent.size), "first_input_ns": int(sent[0]) if sent.size else None,
+            "missing": int(missing.size),
             "missing_before_first_answer": int((missing < first).sum()),
             "longest_missing_run": max((len(b) for b in bursts), default=0),
             "latency_ms": percentiles((lg - s) / 1e6) if s.size else {"n": 0}}
+
+
+def _input_matched_ns(node_log: str) -> int | None:
+    """When the torque node first logged its input matched ("receiving from N publisher(s)",
+    N > 0; ROS time in the log line, the clock the stamps use): at or after the match."""
+    for line in node_log.splitlines():
+        if ": receiving from " in line and " receiving from 0 " not in line:
+            stamp = line.split("] [", 1)[1].split("]", 1)[0]  # "[INFO] [sec.nsec] [name]: ..."
+            sec, _, frac = stamp.partition(".")
+            return int(sec) * 1_000_000_000 + int(frac.ljust(9, "0")[:9])
+    return None
 
 
 def _summary(node_log: str) -> tuple[int | None, int | None]:
@@ -305,6 +317,7 @@ def run_case(case: Case, movements: int, domain: int, work: Path, *, node_args: 
             "stall_ms": stall_ms, "stalls": stalls.count if stalls else 0, "node_cpu_limit": node_cpu,
             "loadavg_start": load0, "loadavg_end": loadavg(), "exits": exits, "sent": sent,
             "node_received": received, "node_processed": processed,
+            "node_input_matched_ns": _input_matched_ns(node_log),
             "input_loss_percent": 100 * (1 - received / sent) if received is not None and sent else None,
             "lost": sent - fig["unique"] if sent is not None else None,
             "packets_dropped": dropped, "udp": udp, "node_socket_rcvbuf": buffers,

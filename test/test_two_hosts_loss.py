@@ -47,13 +47,20 @@ CASES = (
 
 def _why_failed(r: dict) -> str:
     keep = ("case", "exits", "sent", "node_received", "node_processed", "lost", "packets_dropped",
+            "missing_before_first_answer", "node_input_matched_ns", "first_input_ns",
             "udp", "longest_missing_run", "loadavg_start", "drained", "check_bag_exit", "scheduling")
     return (f"{ {k: r.get(k) for k in keep} }\ncheck_bag: {r['check_bag_tail']}\n"
             f"node: {r['node_log_tail']}")
 
 
-#: samples a lossy best-effort link may drop before the first answer (test_loss_case)
-FIRST_DROPS_BEST_EFFORT = 2
+#: Samples a lossy best-effort link may drop before the first answer (test_loss_case); a
+#: discovery race loses tens to hundreds. Measured at 5 % both ways (best_effort_5_both, CI
+#: and 26 runs on one machine, 2026-12-07): the first answer came after 0 lost samples in
+#: 23 runs, 1 in 2, 3 in 2. Three in a row is 1.25e-4 a run by independent drops, so the
+#: start is lossier than the rest, cause not found: each sample was its own datagram and
+#: reached A's interface (an AF_PACKET capture of 10 runs), and the node's input was matched
+#: >= 4 s before the stream. 5 keeps a race apart from that.
+FIRST_DROPS_BEST_EFFORT = 5
 #: the readers of a reliable case at FIFO 50 (see the module docstring); root runs this tier
 REALTIME = ("-p", "realtime_priority:=50")
 
@@ -72,11 +79,12 @@ def test_loss_case(case: Case, tmp_path):
     # the publisher sent its samples (a tick later than 0.5 s skips some: then fewer) and B's
     # own recording holds every one: the count every loss below is measured against
     assert 0.9 * SAMPLES <= r["sent"] <= SAMPLES and r["inputs_recorded"] == r["sent"], why
-    # the hosts found each other first: no sample lost to discovery (a race loses the first
-    # tens to hundreds of samples at 1 kHz). A best-effort case's link drops each sample with
-    # probability loss %, the first ones too (CI, best_effort_1: the first of 15 000 dropped,
-    # the second answered; benchmarks/two_hosts.json has one such run): up to
-    # FIRST_DROPS_BEST_EFFORT of them in a row are the link's (three in a row: 1.25e-4 at 5 %)
+    # the hosts found each other first: the node's input was matched before B's first sample
+    # (its log line comes at or after the match; same clock as the stamps) ...
+    assert r["node_input_matched_ns"] is not None and r["first_input_ns"] is not None, why
+    assert r["node_input_matched_ns"] < r["first_input_ns"], why
+    # ... so no sample is lost to discovery (a race loses the first tens to hundreds at 1 kHz).
+    # A best-effort case's link drops the first ones too: up to FIRST_DROPS_BEST_EFFORT
     allowed = FIRST_DROPS_BEST_EFFORT if case.best_effort and case.loss else 0
     assert r["missing_before_first_answer"] <= allowed, why
     # B's recording holds an answer for every sample the node processed before it stopped
