@@ -31,7 +31,6 @@ import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Self
 
 import numpy as np
 
@@ -43,6 +42,7 @@ from .stats import loadavg, percentiles
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))
 import hostkit  # the test support's harness
+from support.cpushare import CpuShare
 
 #: The shipped lossy-link profile (docs/two-hosts.md "QoS on a lossy link").
 LOSSY_PROFILE = config_file("fastdds_lossy_link.xml")
@@ -111,38 +111,6 @@ class Stalls(threading.Thread):
     def stop(self) -> None:
         self._done.set()
         self.join()
-
-
-class CpuShare:
-    """A cgroup (v1 cpu controller) giving its processes `percent` % of one CPU (cfs quota
-    per 100 ms period): a receiver short of CPU, without loading the machine. None: no
-    limit. Removed on exit."""
-
-    ROOT = Path("/sys/fs/cgroup/cpu")
-
-    def __init__(self, percent: float | None, period_us: int = 100_000) -> None:
-        self.percent, self.period_us = percent, period_us
-        self.path = self.ROOT / f"fdloss{os.getpid()}"
-
-    def __enter__(self) -> Self:
-        if self.percent is not None:
-            self.path.mkdir()
-            (self.path / "cpu.cfs_period_us").write_text(str(self.period_us))
-            quota = round(self.period_us * self.percent / 100)
-            (self.path / "cpu.cfs_quota_us").write_text(str(quota))
-        return self
-
-    def add(self, pid: int) -> None:
-        """Move a process (all its threads, and those it makes later) into the cgroup, from
-        outside: `ip netns exec` mounts a /sys of its own, without the cgroup tree."""
-        if self.percent is not None:
-            (self.path / "cgroup.procs").write_text(str(pid))
-
-    def __exit__(self, *exc) -> None:
-        if self.percent is not None and self.path.exists():
-            for pid in (self.path / "cgroup.procs").read_text().split():
-                (self.ROOT / "cgroup.procs").write_text(pid)  # any left: back to the root
-            self.path.rmdir()
 
 
 def answers_recorded(bag: Path) -> tuple[int, int | None, int]:

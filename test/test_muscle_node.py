@@ -25,7 +25,7 @@ import rosproc
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
-from support.scheduling import fifo_process, fifo_thread, needs_fifo
+from support.cpushare import CpuShare, needs_cpu_share
 
 from forearm_dynamics import JOINT_NAMES, build_model
 from forearm_dynamics.codec.jointstate import JointSeries
@@ -184,43 +184,52 @@ def test_decimation_answers_one_in_n(procs, peer):
     assert "decimated 66" in node.output(), node.output()
 
 
-#: the burst's pace: 40 kHz, 200 samples between two of the node's drains (DRAIN_NS, 5 ms)
-#: where its reader keeps 500, and several times what the node answers (53-150 us a sample)
-BURST_PERIOD_NS = 25_000
+#: The backlog test's stream: 5 s at the real input rate, while the node's executor has 2 %
+#: of a CPU (1 ms in each 50 ms: it answers ~100 samples in those 5 s)
+BACKLOG_SAMPLES, BACKLOG_RATE_HZ, BACKLOG_CPU_PERCENT, BACKLOG_PERIOD_US = 5000, 1000.0, 2.0, 50_000
 
 
-@needs_fifo
+@needs_cpu_share
 def test_a_backlog_past_the_input_queue_is_answered_whole_and_in_order(procs, peer):
-    """The node's input is best effort (the default here) and its DDS reader keeps at most
-    input_depth samples; a node behind by more lost the rest (the chain benchmark: 2 203 of
-    97 500 at load 2-4, backlog at the 5 000 ceiling). Here 5 000 samples are published at
-    40 kHz into a 500-sample reader queue, far faster than the node solves them: the node
-    must take them into its own queue (muscle_backlog.py) and answer every one, in order,
-    and its summary must show it held more than the DDS queue could. With backlog_limit:=0
-    (no own queue) 1 272 of the 5 000 were answered (checked by hand).
+    """The node's DDS reader keeps at most input_depth samples (KEEP_LAST); a node behind by
+    more lost the rest (the chain benchmark: 2 203 of 97 500 at load 2-4, backlog at the
+    5 000 ceiling). Here the node's executor gets 2 % of a CPU (support/cpushare.py; Fast
+    DDS's threads are not limited) while 5 000 samples come at 1 kHz into a 500-sample
+    reader queue, so it falls thousands behind, as on a loaded machine: it must take them
+    into its own queue (muscle_backlog.py) and answer every one, in order, and its summary
+    must show it held more than the DDS queue could. With backlog_limit:=0 (no own queue)
+    788 of the 5 000 were answered (checked by hand).
 
-    The claim needs both sides to run during the burst's 0.13 s: the node draining its
-    reader every 5 ms, this test publishing. At normal priority a second `make test` on the
-    machine starved the node for longer than its reader's 500 samples last (1 531 of 5 000
-    answered, the rest lost in DDS, not in the node), so the node's threads and this
-    publishing thread run at SCHED_FIFO (support/scheduling.py) for the burst."""
+    The input is reliable here, so that the transport loses nothing the claim is not about:
+    best effort, 1 028-1 552 samples were lost before the node (input gaps, its DDS threads
+    unlimited) in 1 of 14 runs beside a disk writer and 1 of 2 quiet runs with 100 ms quota
+    periods, cause not found (a middleware thread waiting on the paused executor?). Reliable:
+    18 of 18 beside the disk writer. The KEEP_LAST queue the claim is about overwrites
+    unread samples either way (the 788 above are with reliable input).
+
+    Until 2026-12-07 the node ran at SCHED_FIFO and the samples came in a 40 kHz burst: the
+    node had to drain within 12.5 ms, and beside heavy disk writes this VM's vCPUs are taken
+    away for 30-50 ms at a time whatever the priority (docs/testing.md; 2 551 of 5 000
+    answered, input gaps 2 449). At 1 kHz such a pause is 50 samples of the 500."""
     node = procs.start("muscle_node", "-p", "config_topic:=''", "-p", "input_depth:=500",
-                       "-p", "qos_depth:=10000", "-p", "nice:=0")
+                       "-p", "input_reliable:=true", "-p", "qos_depth:=10000", "-p", "nice:=0")
     client = Client(peer, depth=12000)
     client.ready(node)
-    q, qd, tau = _torques(5000)
+    q, qd, tau = _torques(BACKLOG_SAMPLES)
     stamps = [T0 + k * PERIOD for k in range(len(q))]
     raw = [serialize_message(client.message(t, q[k], qd[k], tau[k])) for k, t in enumerate(stamps)]
-    fifo_process(node.proc.pid, 20)
-    with fifo_thread(10):  # below the node: on one CPU the node's drain comes first
-        due = time.perf_counter_ns()
+    period = 1.0 / BACKLOG_RATE_HZ
+    with CpuShare(BACKLOG_CPU_PERCENT, BACKLOG_PERIOD_US) as share:
+        assert "python" in share.add_threads(node.proc.pid)  # the executor; not DDS's threads
+        due = time.monotonic()
         for data in raw:
-            while time.perf_counter_ns() < due:
-                pass
+            if (wait := due - time.monotonic()) > 0:
+                time.sleep(wait)
             client.pub.publish(data)
-            due += BURST_PERIOD_NS
-    assert client.wait_for(len(stamps), 180.0), \
-        f"{len(client.forces)} of {len(stamps)} answered\n{node.output()}"
+            due += period
+    if not client.wait_for(len(stamps), 180.0):
+        node.stop()  # its summary says where the rest went (input gaps: lost before the node)
+        pytest.fail(f"{len(client.forces)} of {len(stamps)} answered\n{node.output()}")
     peer.spin_for(0.5)
     assert [_stamp(m) for m in client.forces] == stamps  # each once, in order
     assert [_stamp(m) for m in client.reserves] == stamps

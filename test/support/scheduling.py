@@ -1,15 +1,10 @@
-"""Real-time scheduling for tests that need the CPU at a given moment (root here and in CI).
-
-A test whose claim needs a process to run during a burst (a node taking samples as they
-arrive) cannot get it from a shared machine at normal priority: a second `make test` beside
-it starves either side for tens of ms. SCHED_FIFO threads run before every normal one, so
-the claim holds whatever else the machine does; where FIFO is not allowed, `needs_fifo`
-skips with the reason."""
+"""Whether this process may use real-time scheduling (root here and in CI): `needs_fifo`
+skips a test of the nodes' realtime_priority where the kernel would refuse it, with the
+reason. (No test relies on FIFO to get the CPU in time: a virtual machine's vCPU can be
+taken away for 30-50 ms whatever the priority; see support/cpushare.py.)"""
 
 from __future__ import annotations
 
-import contextlib
-import os
 import resource
 from pathlib import Path
 
@@ -27,22 +22,3 @@ def may_set_fifo(priority: int = 50) -> bool:
 
 
 needs_fifo = pytest.mark.skipif(not may_set_fifo(), reason="needs CAP_SYS_NICE or rtprio >= 50")
-
-
-def fifo_process(pid: int, priority: int) -> int:
-    """Every thread `pid` has now to SCHED_FIFO `priority` (threads it starts later inherit
-    their creator's policy); returns how many."""
-    tids = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
-    for tid in tids:
-        os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-    return len(tids)
-
-
-@contextlib.contextmanager
-def fifo_thread(priority: int):
-    """The calling thread at SCHED_FIFO `priority` inside the block, normal after it."""
-    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    try:
-        yield
-    finally:
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
