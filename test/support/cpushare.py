@@ -45,9 +45,13 @@ class CpuShare:
     def __enter__(self) -> Self:
         if self.percent is not None:
             self.path.mkdir()
-            (self.path / "cpu.cfs_period_us").write_text(str(self.period_us))
-            quota = round(self.period_us * self.percent / 100)
-            (self.path / "cpu.cfs_quota_us").write_text(str(quota))
+            try:  # the kernel refuses a quota under 1 ms (EINVAL): no cgroup left behind
+                (self.path / "cpu.cfs_period_us").write_text(str(self.period_us))
+                quota = round(self.period_us * self.percent / 100)
+                (self.path / "cpu.cfs_quota_us").write_text(str(quota))
+            except OSError:
+                self.path.rmdir()
+                raise
         return self
 
     def add(self, pid: int) -> None:
