@@ -102,7 +102,7 @@ class Controller:
     """Computed torque: feed-forward from torque_node + PD on arm_sim's state."""
 
     def __init__(self, node, arm, start_posture: np.ndarray, feedforward: bool = True,
-                 lockstep: bool = False, movements: int = 1, gap_s: float | None = GAP_S):
+                 lockstep: bool = False, movement_count: int = 1, gap_s: float | None = GAP_S):
         self.model, self.data = arm.model, arm.model.createData()
         self.lockstep = lockstep
         self.q = start_posture.copy()  # the newest state
@@ -113,7 +113,7 @@ class Controller:
         self.waiting_since: float | None = None  # lockstep: waiting for the reference
         self.stale_steps = 0  # lockstep: steps taken without the reference of their time
         #: the playlist's length and gap, to predict the next start (None: not known)
-        self.movements = movements
+        self.movement_count = movement_count
         self.gap_ns = None if gap_s is None else round(gap_s * 1e9)
         self.next_start: int | None = None  # lockstep: when the next movement is due (sim ns)
         #: lockstep, per step: state stamp, reference stamp, 1 if it waited out WAIT_S
@@ -170,7 +170,7 @@ class Controller:
         m = json.loads(msg.data)
         m["seen_at_ns"] = self.t  # the simulated time it arrived at (lockstep: how late)
         self.markers.append(m)
-        if m["index"] + 1 < self.movements and self.gap_ns is not None:
+        if m["index"] + 1 < self.movement_count and self.gap_ns is not None:
             self.next_start = (m["t0_ns"] + m["samples"] * round(1e9 / m["rate_hz"])
                                + self.gap_ns)
         else:
