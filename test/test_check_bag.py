@@ -39,6 +39,8 @@ class Run:
     latency_ns: int = 300_000
     offset: dict[int, float] = field(default_factory=dict)  # DOF -> fraction of its ptp added
     drop: tuple[int, ...] = ()  # torque sample indices (over the run) left out
+    drop_states: tuple[int, ...] = ()  # sample indices left out of joint_states and joint_torques
+    announce: bool = False  # markers announce their sample count, as trajectory_publisher's do
     config: bool = True
     markers: bool = True
     torques: bool = True
@@ -90,6 +92,8 @@ def write_run(path: Path, run: Run) -> int:
                           "t0_ns": t0, "t0": t0 / 1e9}
                 if run.sensor is not None:
                     marker["sensor"] = run.sensor
+                if run.announce:
+                    marker["samples"] = len(t)
                 w.write(mv_ch, serialize_message(String(data=json.dumps(marker))), t0 - 1000)
             if run.sensor is not None:  # what the simulated sensor published
                 rng = np.random.default_rng(mid)
@@ -99,6 +103,9 @@ def write_run(path: Path, run: Run) -> int:
                 stamp = t0 + round(t[k] * 1e9)
                 m = JointState(name=names, position=q[k].tolist(), velocity=qd[k].tolist())
                 m.header.stamp.sec, m.header.stamp.nanosec = divmod(stamp, 10**9)
+                if n_states in run.drop_states:  # lost before the bag: neither it nor an answer
+                    n_states += 1
+                    continue
                 w.write(js, serialize_message(m), stamp + 50_000)
                 if tq is not None and n_states not in run.drop:
                     m.effort = tau[k].tolist()
@@ -223,6 +230,47 @@ def test_dropped_messages_are_reported(tmp_path, reference, capsys) -> None:
     assert "! movement 28 (index 1): 1497 of 1500 expected samples: 3 of its 1500" in text
     # the pipeline itself is still right on the samples that arrived
     assert not any("pipeline" in f for f in json.loads(out_json.read_text())["failures"])
+
+
+def test_inputs_missing_from_the_bag_fail_by_movement(tmp_path, reference, capsys) -> None:
+    """Samples lost before the bag (a sample and its answer both absent: DDS, the recorder,
+    the publisher) leave no unanswered joint_states; the marker's announced count finds them."""
+    bag = tmp_path / "holes.mcap"
+    write_run(bag, Run(drop_states=(700, 701, 702, 2200), announce=True))
+    out_json = tmp_path / "r.json"
+    code, text = _check(bag, reference, "--json", str(out_json), capsys=capsys)
+    assert code == 1, text
+    report = json.loads(out_json.read_text())
+    assert report["delivery"]["lost"] == 0  # every recorded sample was answered
+    assert [m["inputs_missing"] for m in report["movements"]] == [3, 1]
+    fail = [f for f in report["failures"] if "before the bag" in f]
+    assert len(fail) == 1 and fail[0].startswith("lost 4 joint_states before the bag"), report["failures"]
+    assert "movement 1 at index 0 (3 of 1500), movement 28 at index 1 (1 of 1500)" in fail[0]
+    # without an announced count (markers of older runs) it stays a note, as before
+    plain = tmp_path / "holes_unannounced.mcap"
+    write_run(plain, Run(drop_states=(700,)))
+    code, text = _check(plain, reference, capsys=capsys)
+    assert code == 0 and "only 1499 joint_states were recorded in its window" in text, text
+
+
+@pytest.mark.parametrize("where", ["recording_ends", "publisher_stopped", "matched_late"])
+def test_a_movement_missing_its_start_or_end_is_not_a_loss(tmp_path, reference, capsys, where) -> None:
+    """Samples missing at a movement's end (the recording ends inside it; the publisher was
+    killed and the next movement comes much later) or start (a reader matched a restarted
+    publisher late): a note, not a failure; a hole beside them still counts."""
+    drop = {"recording_ends": range(2500, 3000), "publisher_stopped": range(1000, 1500),
+            "matched_late": range(1500, 1800)}[where]
+    bag = tmp_path / f"{where}.mcap"
+    write_run(bag, Run(announce=True, drop_states=tuple(drop)))
+    out_json = tmp_path / "r.json"
+    code, text = _check(bag, reference, "--json", str(out_json), capsys=capsys)
+    report = json.loads(out_json.read_text())
+    assert [m["inputs_missing"] for m in report["movements"]] == [0, 0], report["movements"]
+    assert code == 0, text
+    write_run(bag.with_suffix(".hole.mcap"), Run(announce=True, drop_states=(*drop, 200)))
+    code, text = _check(bag.with_suffix(".hole.mcap"), reference, "--json", str(out_json), capsys=capsys)
+    assert code == 1 and [m["inputs_missing"] for m in json.loads(out_json.read_text())["movements"]] \
+        == [1, 0], text
 
 
 def test_slow_latency_is_reported_not_failed(tmp_path, reference, capsys) -> None:

@@ -8,7 +8,8 @@
 Exit codes (forearm_dynamics.exit_codes) mean correctness, not speed:
   0 (OK)    the data are right: every threshold met.
   1 (DATA)  the data are wrong or lost: each failure named (movement, DOF, value; a lost
-            message by its stamp). Latency fails only when a maximum is asked for
+            message by its stamp; joint_states a movement's marker announced that the bag
+            lacks between recorded ones, by movement). Latency fails only when a maximum is asked for
             (--max-latency-p99-ms, or latency_p99_ms_max in the thresholds file; off by
             default): otherwise it is reported against its target with the load average.
   2 (USAGE) the bag cannot be analysed (missing, empty, not MCAP, truncated before the
@@ -30,7 +31,10 @@ The --json report (NRMSE values are fractions there: 0.01 = 1 %; times in ms or 
   joint_names  the model's joint order (keys of the per-DOF dicts)
   movements    per movement marker, in bag order: index, id, name, elbow, t0_ns,
                samples (joint_torques in its window), expected, shortfall (why samples <
-               expected, or null), state_error_rad, state_dof, pipeline_nrmse {dof: value},
+               expected, or null), inputs_missing (joint_states its marker announced that
+               the bag lacks between recorded ones: a failure, as a lost answer is; a
+               movement's missing start or end is a note), state_error_rad, state_dof,
+               pipeline_nrmse {dof: value},
                pipeline_worst {nrmse, dof}, pipeline_left_out (DOFs under the ptp floor),
                model_nrmse {dof: value} or null, model_worst {nrmse, dof}, model_note
                (why the model error was skipped, or null)
@@ -166,6 +170,7 @@ def to_json(report: CheckReport, bag_info, th: Thresholds, code: int) -> dict:
         "movements": [{
             "index": r.index, "id": r.id, "name": r.name, "elbow": r.elbow, "t0_ns": r.t0_ns,
             "samples": r.samples, "expected": r.expected, "shortfall": r.shortfall or None,
+            "inputs_missing": r.inputs_missing,
             "state_error_rad": r.state_error, "state_dof": r.state_dof,
             "pipeline_nrmse": dict(zip(names, r.pipeline_nrmse, strict=True)),
             "pipeline_worst": dict(zip(("nrmse", "dof"), r.worst(r.pipeline_nrmse, names), strict=True)),

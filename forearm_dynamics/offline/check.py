@@ -67,6 +67,12 @@ class MovementResult:
     state_error: float = float("nan")  # max |joint_states position - analytic q|, rad
     state_dof: str = ""
     shortfall: str = ""  # why samples < expected ("" when the movement is complete)
+    #: joint_states the marker announced that are missing from the bag between the
+    #: movement's first and last recorded ones, its whole window recorded (_holes): lost
+    #: between a running publisher and the bag (DDS, the recorder); 0 when the marker
+    #: announces no count or a simulated sensor drops samples on purpose (drop_fraction)
+    inputs_missing: int = 0
+    announced: bool = False  # `expected` is the marker's own count (trajectory_publisher)
     sensor: dict | None = None  # the marker's simulated-sensor settings, if any
     state_noise_rms: float = float("nan")  # rms of joint_states position - analytic q, rad
 
@@ -138,7 +144,7 @@ def _pipeline(arm, marker: Marker, next_t0: int | None, torques: JointSeries, fl
     nv = len(arm.joint_names)
     res = MovementResult(index, mv.id, marker.name or mv.name, marker.elbow or mv.elbow, marker.t0_ns,
                          window, int(sel.sum()), expected, np.full(nv, np.nan), 0,
-                         sensor=marker.sensor)
+                         sensor=marker.sensor, announced=marker.samples is not None)
     if res.samples == 0:
         return res
     t = (torques.stamp_ns[sel] - marker.t0_ns) / 1e9
@@ -182,10 +188,33 @@ def _shortfall(res: MovementResult, duration_s: float, states: JointSeries | Non
         elif n_states is not None:
             why.append(f"only {n_states} joint_states were recorded in its window: the "
                        "publisher sent fewer, or the recorder missed them")
+            if res.announced and not (res.sensor or {}).get("drop_fraction"):  # not dropped on purpose
+                res.inputs_missing = _holes(states.stamp_ns[sel], res.t0_ns, res.expected,
+                                            duration_s)
         else:
             why.append("no joint_states in the bag to tell whether inputs or answers are missing")
     return (f"{res.samples} of {res.expected} expected samples: " + "; ".join(why or [
         "joint_torques carry stamps outside the movement's window"]))
+
+
+def _holes(stamps_ns: np.ndarray, t0_ns: int, expected: int, duration_s: float) -> int:
+    """Announced samples missing between a movement's first and last recorded ones.
+
+    Missing at either end is not counted: a publisher killed or stopped mid-movement sends no
+    more (its tail), and a reader that matched a restarted publisher late misses its first
+    samples (discovery): neither is a sample lost between a running publisher and the bag.
+    The ends are estimated from the stamps on the movement's nominal grid (expected samples
+    over duration_s); a late timer tick stamps samples later than the grid (the publisher
+    stamps when it sends), which makes the ends look larger and the holes smaller, never
+    the other way: a hole is counted only when the samples around it were recorded."""
+    n = len(stamps_ns)
+    if n < 2 or expected <= n:
+        return 0
+    period_ns = duration_s * 1e9 / expected
+    first, last = int(stamps_ns.min()), int(stamps_ns.max())
+    before = max(0, round((first - t0_ns) / period_ns))
+    after = max(0, round((t0_ns + (expected - 1) * period_ns - last) / period_ns))
+    return max(0, expected - n - before - after)
 
 
 def _state_error(res: MovementResult, states: JointSeries, names: tuple[str, ...]) -> None:
@@ -358,6 +387,16 @@ def verdicts(report: CheckReport, th: Thresholds) -> list[str]:
         more = f" and {d.lost - 5} more" if d.lost > 5 else ""
         out.append(f"lost {d.lost} joint_states without joint_torques ({d.loss_pct:.3f} %; at most "
                    f"{th.loss_max} allowed): stamp {where}{more}")
+    missing = [r for r in report.movements if r.inputs_missing]
+    n_missing = sum(r.inputs_missing for r in missing)
+    if n_missing > th.loss_max:
+        where = ", ".join(f"movement {r.id} at index {r.index} ({r.inputs_missing} of {r.expected})"
+                          for r in missing[:5])
+        out.append(f"lost {n_missing} joint_states before the bag: announced by their movement's "
+                   f"marker, missing between samples that were recorded (at most "
+                   f"{th.loss_max} allowed; DDS or the recorder dropped them, so no answer "
+                   f"can be checked): {where}"
+                   + (f" and {len(missing) - 5} more movements" if len(missing) > 5 else ""))
     p99 = d.latency_ms.get("p99", float("nan"))
     if th.latency_p99_ms_max is not None and p99 > th.latency_p99_ms_max:
         out.append(f"latency p99 {p99:.3f} ms > {th.latency_p99_ms_max:g} ms (asked-for maximum; "
