@@ -32,6 +32,14 @@ from forearm_dynamics.exit_codes import OK
 from forearm_dynamics.nodes.common import make_executor, spin, stream_qos
 
 
+def _serving(values: dict) -> bool:
+    """A /diagnostics period in which the node answered (its callback figures are about it)."""
+    try:
+        return float(values.get("output_rate_hz", 0)) > 0 and values.get("compute_us_p50", "nan") != "nan"
+    except ValueError:
+        return False
+
+
 def _timer(recv: array, stamps: array):
     """Raw callback appending (receive time, header stamp) of each message to two arrays."""
     unpack, now = struct.Struct("<iI").unpack_from, time.time_ns
@@ -68,8 +76,11 @@ class Receiver:
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
             if status.name.startswith(self._prefix):
-                self.diag.append({"t": time.time(), "name": status.name,
-                                  "values": {kv.key: kv.value for kv in status.values}})
+                values = {kv.key: kv.value for kv in status.values}
+                self.diag.append({"t": time.time(), "name": status.name, "values": values})
+                if _serving(values):  # torque_path waits for this before it stops the run
+                    print(f"receiver: serving period {sum(_serving(d['values']) for d in self.diag)}",
+                          flush=True)
 
     def _check_matched(self) -> None:
         if not self._matched and self.sub.get_publisher_count() > 0:

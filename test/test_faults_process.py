@@ -320,7 +320,10 @@ PARTICIPANT_IDS = 120  # the ids whose ports stay below the next domain's (250 /
 
 def participant_ports(pid: int, domain: int) -> set[int]:
     """The discovery and user-data unicast ports of `domain`'s participants
-    (processes.rtps_port) that process `pid` has bound, from /proc."""
+    (processes.rtps_port) that process `pid` has bound, from /proc: both ports of a
+    participant id, never one alone. Fast DDS's sending sockets take ephemeral ports, which
+    can fall in the domain's range (32768-60999 holds it): one at 38352, the discovery port
+    of id 96, made a CI run beside a second suite see a port the killed node never had."""
     inodes = set()
     for fd in Path(f"/proc/{pid}/fd").iterdir():
         try:
@@ -329,13 +332,16 @@ def participant_ports(pid: int, domain: int) -> set[int]:
             continue
         if link.startswith("socket:["):
             inodes.add(link[8:-1])
-    ranged = {rtps_port(domain, p, user) for p in range(PARTICIPANT_IDS) for user in (False, True)}
-    ports = set()
+    bound = set()
     for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
         fields = line.split()
-        port = int(fields[1].rsplit(":", 1)[1], 16)
-        if fields[9] in inodes and port in ranged:
-            ports.add(port)
+        if fields[9] in inodes:
+            bound.add(int(fields[1].rsplit(":", 1)[1], 16))
+    ports = set()
+    for p in range(PARTICIPANT_IDS):
+        pair = {rtps_port(domain, p, False), rtps_port(domain, p, True)}
+        if pair <= bound:
+            ports |= pair
     return ports
 
 
