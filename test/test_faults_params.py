@@ -295,14 +295,15 @@ def test_bad_params_file_and_typos(tmp_path) -> None:
 
 # -- runtime changes -----------------------------------------------------------------------------
 def _call(peer: rosproc.Peer, srv_type, name: str, request, timeout: float = 15.0,
-          attempts: int = 3):
+          attempts: int = 3, wait: float | None = None):
     """One service call. wait_for_service matches the request topic only: a request sent
     before the server's reply writer has matched this client's reader is answered into the
     void (seen on this loaded machine), so an unanswered request is sent again (these
-    requests are idempotent: reads, and changes the node refuses)."""
+    requests are idempotent: reads, and changes the node refuses). `wait`: how long the
+    service may take to appear (default `timeout`)."""
     client = peer.node.create_client(srv_type, name)
     try:
-        assert client.wait_for_service(timeout_sec=timeout), f"no service {name}"
+        assert client.wait_for_service(timeout_sec=wait or timeout), f"no service {name}"
         for _ in range(attempts):
             future = client.call_async(request)
             if peer.spin_until(future.done, timeout):
@@ -314,8 +315,11 @@ def _call(peer: rosproc.Peer, srv_type, name: str, request, timeout: float = 15.
 
 
 def _values(peer, node: str) -> dict[str, ParameterMsg]:
+    # the first call after the node's start: its services come with the node, whose start-up
+    # may take the suite's whole allowance on a loaded machine (15 s did not, beside a
+    # second suite: "no service /torque_node/list_parameters")
     names = _call(peer, ListParameters, f"/{node}/list_parameters",
-                  ListParameters.Request()).result.names
+                  ListParameters.Request(), wait=rosproc.STARTUP_S).result.names
     got = _call(peer, GetParameters, f"/{node}/get_parameters", GetParameters.Request(names=names))
     return dict(zip(names, got.values, strict=True))
 
