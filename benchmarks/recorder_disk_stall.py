@@ -13,7 +13,7 @@ blocks to a file beside the bag, fsyncs every --gib and starts again (what `dd c
 does), and reports what the recorder lost, the writer's throughput and the load average;
 the same run without the writer is the baseline (`quiet`).
 
-What it found (stop 49, docs/reliability.md): nothing lost beside a 500-700 MB/s writer. Linux
+What it found (stop 49, docs/reliability.md): nothing lost beside a 500-740 MB/s writer. Linux
 throttles a writer by its own dirtying rate (IO-less dirty throttling), so the recorder's
 ~0.15 MB/s of chunks is not held: a 70 kB write took at most 0.5 ms beside the dd loop, and
 0.6 ms with vm.dirty_bytes lowered to 32 MiB (a throwaway probe). A file that really takes
