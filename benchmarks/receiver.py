@@ -31,13 +31,7 @@ from sensor_msgs.msg import JointState
 from forearm_dynamics.exit_codes import OK
 from forearm_dynamics.nodes.common import make_executor, spin, stream_qos
 
-
-def _serving(values: dict) -> bool:
-    """A /diagnostics period in which the node answered (its callback figures are about it)."""
-    try:
-        return float(values.get("output_rate_hz", 0)) > 0 and values.get("compute_us_p50", "nan") != "nan"
-    except ValueError:
-        return False
+from .stats import serving_period
 
 
 def _timer(recv: array, stamps: array):
@@ -61,6 +55,7 @@ class Receiver:
         self.recv_ns, self.stamp_ns = array("q"), array("q")
         self.also_recv_ns, self.also_stamp_ns = array("q"), array("q")
         self.diag: list[dict] = []
+        self.serving = 0  # periods of self.diag in which the node answered
         self._prefix = diag_prefix
         self._matched = False
         self.sub = node.create_subscription(
@@ -78,9 +73,9 @@ class Receiver:
             if status.name.startswith(self._prefix):
                 values = {kv.key: kv.value for kv in status.values}
                 self.diag.append({"t": time.time(), "name": status.name, "values": values})
-                if _serving(values):  # torque_path waits for this before it stops the run
-                    print(f"receiver: serving period {sum(_serving(d['values']) for d in self.diag)}",
-                          flush=True)
+                if serving_period(values):  # torque_path waits for this before it stops the run
+                    self.serving += 1
+                    print(f"receiver: serving period {self.serving}", flush=True)
 
     def _check_matched(self) -> None:
         if not self._matched and self.sub.get_publisher_count() > 0:

@@ -39,6 +39,16 @@ def percentiles(values, scale: float = 1.0) -> dict[str, float]:
             "max": float(v.max()), "mean": float(v.mean())}
 
 
+def serving_period(values: dict) -> bool:
+    """A node's /diagnostics period (its key/value strings) in which it answered: its
+    callback figures are about the stream (receiver.py announces them, torque_path.py
+    takes them)."""
+    try:
+        return float(values.get("output_rate_hz", 0)) > 0 and values.get("compute_us_p50", "nan") != "nan"
+    except ValueError:
+        return False
+
+
 def loadavg() -> list[float] | None:
     """1, 5 and 15-minute load averages (2 cores: above ~1.5 someone else is busy too)."""
     try:

@@ -39,7 +39,7 @@ from forearm_dynamics.movements import get_movement
 from forearm_dynamics.processes import Child, ros_env
 
 from . import module_env
-from .stats import percentiles
+from .stats import percentiles, serving_period
 
 NODE_READY = "joint_torques ("  # stream_node logs "<in> -> <out> (depth ..., executor)"
 STALL_GAP_MS = 100.0  # a receive gap this long counts as a delivery stall
@@ -89,9 +89,7 @@ def _callback_stats(diag: list[dict], t0: float) -> dict:
     """Median over the 1 s periods of the node's own percentiles: the periods received from
     the first answer (t0) on in which the node answered (it has no other input; a period
     that ends after the stream still holds it, however late its message came)."""
-    rows = [d["values"] for d in diag if t0 <= d["t"]]
-    rows = [r for r in rows if float(r.get("output_rate_hz", 0)) > 0
-            and r.get("compute_us_p50", "nan") != "nan"]
+    rows = [d["values"] for d in diag if t0 <= d["t"] and serving_period(d["values"])]
     if not rows:
         return {"periods": 0}
     p50 = np.array([float(r["compute_us_p50"]) for r in rows])

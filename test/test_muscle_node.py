@@ -321,8 +321,9 @@ def test_follows_the_torque_nodes_live_body_size_change(procs, peer):
         """muscle_forces received whose torques were received too (stamps from `after` on)."""
         return sum(1 for m in client.forces if _stamp(m) >= after and _stamp(m) in torques)
 
-    # p50's answers first: fed until more than 50 arrived (a fixed 1 s of feed left exactly
-    # 50 beside a second test suite: the chain matched and warmed up late)
+    # p50's answers first: fed until more than 60 arrived, for the check's "more than 50" (a
+    # fixed 1 s of feed left exactly 50 beside a second test suite: the chain matched and
+    # warmed up late)
     for _ in range(60):
         feed(0.5)
         if answered() > 60:
