@@ -56,7 +56,7 @@ while True:
 """
 
 
-def _writer_rate(text: str) -> float | None:
+def writer_rate(text: str) -> float | None:
     lines = [x.split() for x in text.splitlines() if x.startswith("WRITER ")]
     if not lines:
         return None
@@ -80,7 +80,7 @@ def section(domain: int, work: Path, seconds: float, topics: int, writer: list[s
             Path(writer[0]).unlink(missing_ok=True)
     res["loadavg_start"], res["loadavg_end"] = load0, loadavg()
     if proc is not None:
-        res["writer_mb_per_s"] = _writer_rate(out)
+        res["writer_mb_per_s"] = writer_rate(out)
     return res
 
 

@@ -35,15 +35,20 @@ class Deadlines:
         self.checked = 0
         self.missed = dict.fromkeys(reasons, 0)
         self.worst_ns = 0  # the largest reference -> output time among the misses
+        # the largest live wait since take_behind(), counted or not: how far behind its
+        # input the node is (stream_node warns when that nears its queue's length)
+        self.behind_ns = 0
 
     def check_input(self, wait_ns: int, compute_ns: int) -> None:
         """One output per input: `wait_ns` = callback entry - input stamp (system clock)."""
+        if not 0 <= wait_ns < _LIVE_NS:
+            wait_ns = 0  # not a live stamp: the wait before the callback is unknown
+        elif wait_ns > self.behind_ns:
+            self.behind_ns = wait_ns
         d = self.deadline_ns
         if not d:
             return
         self.checked += 1
-        if not 0 <= wait_ns < _LIVE_NS:
-            wait_ns = 0  # not a live stamp: the wait before the callback is unknown
         total = wait_ns + compute_ns
         if total > d:
             self.missed["queued" if wait_ns > compute_ns else "compute"] += 1
@@ -66,6 +71,11 @@ class Deadlines:
         self.checked += periods
         self.missed["dropped"] += periods
         self.worst_ns = max(self.worst_ns, late_ns)
+
+    def take_behind(self) -> int:
+        """The largest live wait (ns) since the last call; starts afresh."""
+        out, self.behind_ns = self.behind_ns, 0
+        return out
 
     @property
     def missed_total(self) -> int:

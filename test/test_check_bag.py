@@ -48,11 +48,26 @@ class Run:
     late_ms: float = 0.0  # the first movement's last 100 samples sent (and stamped) this late
     sensor: dict | None = None  # marker "sensor": noise_deg on the published positions
     position_offset: float = 0.0  # rad added to every published position (a wrong publisher)
+    # (first index, count): those samples unanswered and, as after a node that fell behind
+    # its queue, the next 500 answers late by 1.0 s falling to nothing (the node catching up)
+    overflow: tuple[int, int] = ()
+    queue_depth: int | None = None  # the torque node's config states its input queue
 
 
-def _config(arm) -> str:
+def _config(arm, queue_depth: int | None = None) -> str:
     """The torque node's latched config JSON, made by the torque node's own code."""
-    return json.dumps(model_config(arm))
+    out = model_config(arm)
+    if queue_depth is not None:
+        out["input"] = {"missing_joints": "reject", "held_joints": [], "queue_depth": queue_depth}
+    return json.dumps(out)
+
+
+def _late_ns(run: Run, k: int) -> int:
+    """How much later than run.latency_ns sample k (over the run) is answered (overflow)."""
+    if not run.overflow:
+        return 0
+    after = k - sum(run.overflow)
+    return round(1e9 * (1.0 - after / 500)) if 0 <= after < 500 else 0
 
 
 def write_run(path: Path, run: Run) -> int:
@@ -67,7 +82,8 @@ def write_run(path: Path, run: Run) -> int:
         cfg = w.add_topic("/torque_node/config", "std_msgs/msg/String",
                           TopicQos(depth=1, durability="transient_local"))
         if run.config:
-            w.write(cfg, serialize_message(String(data=_config(arm))), T_START - 10**9)
+            w.write(cfg, serialize_message(String(data=_config(arm, run.queue_depth))),
+                    T_START - 10**9)
         if run.load:
             diag = w.add_topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
             for k, load in enumerate(run.load):
@@ -107,9 +123,10 @@ def write_run(path: Path, run: Run) -> int:
                     n_states += 1
                     continue
                 w.write(js, serialize_message(m), stamp + 50_000)
-                if tq is not None and n_states not in run.drop:
+                lost = run.overflow and 0 <= n_states - run.overflow[0] < run.overflow[1]
+                if tq is not None and n_states not in run.drop and not lost:
                     m.effort = tau[k].tolist()
-                    w.write(tq, serialize_message(m), stamp + run.latency_ns)
+                    w.write(tq, serialize_message(m), stamp + run.latency_ns + _late_ns(run, n_states))
                 n_states += 1
             t0 += round(mv.duration * 1e9) + 100_000_000
     return n_states
@@ -230,6 +247,42 @@ def test_dropped_messages_are_reported(tmp_path, reference, capsys) -> None:
     assert "! movement 28 (index 1): 1497 of 1500 expected samples: 3 of its 1500" in text
     # the pipeline itself is still right on the samples that arrived
     assert not any("pipeline" in f for f in json.loads(out_json.read_text())["failures"])
+
+
+def test_a_queue_overflow_is_told_from_other_losses(tmp_path, reference, capsys) -> None:
+    """Answers lost while the node was a queue behind (the next ones came ~1 s late) are named
+    as an overflow when the config states the queue; the same losses with prompt neighbours,
+    or without the queue in the config, are not blamed on the machine."""
+    bag = tmp_path / "overflow.mcap"
+    write_run(bag, Run(overflow=(600, 300), queue_depth=1000))
+    out_json = tmp_path / "r.json"
+    code, text = _check(bag, reference, "--json", str(out_json), capsys=capsys)
+    assert code == 1
+    d = json.loads(out_json.read_text())["delivery"]
+    assert d["lost"] == 300 and d["lost_runs"] == 1
+    assert d["behind_after_loss_ms"] == pytest.approx(1000.0, abs=1.0)
+    fail = next(line for line in text.splitlines() if line.startswith("FAIL: lost 300"))
+    # the queue in seconds at the rate recorded (968 Hz: the 0.1 s between the movements)
+    assert "came up to 1.00 s later than usual, about what the torque node's input queue " \
+        "holds (1000 samples = 1.03 s at 968 Hz): the node fell behind its input and DDS " \
+        "dropped the oldest samples" in fail
+    assert "qos_depth" in fail
+
+    prompt = tmp_path / "prompt.mcap"  # the same samples lost, their neighbours on time
+    write_run(prompt, Run(drop=tuple(range(600, 900)), queue_depth=1000))
+    code, text = _check(prompt, reference, "--json", str(out_json), capsys=capsys)
+    assert code == 1
+    d = json.loads(out_json.read_text())["delivery"]
+    assert d["lost"] == 300 and d["lost_runs"] == 1 and d["behind_after_loss_ms"] < 1.0
+    fail = next(line for line in text.splitlines() if line.startswith("FAIL: lost 300"))
+    assert "queue" not in fail and "later than usual" not in fail
+
+    old = tmp_path / "old.mcap"  # a bag whose config does not state the queue
+    write_run(old, Run(overflow=(600, 300)))
+    code, text = _check(old, reference, capsys=capsys)
+    fail = next(line for line in text.splitlines() if line.startswith("FAIL: lost 300"))
+    assert fail.endswith("came up to 1.00 s later than usual (the bag's config does not "
+                         "state the node's queue)"), fail
 
 
 def test_inputs_missing_from_the_bag_fail_by_movement(tmp_path, reference, capsys) -> None:

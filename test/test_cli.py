@@ -91,3 +91,13 @@ def test_make_demo_takes_another_domain(how, domain):
                        capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode == 0, r.stderr
     assert f"ROS_DOMAIN_ID={domain} " in r.stdout.splitlines()[-1], r.stdout
+
+
+def test_demo_refuses_a_param_that_is_not_name_value(capsys):
+    """`demo --param` passes torque_node parameters; anything but NAME:=VALUE is one line,
+    exit 2, before any process starts."""
+    from forearm_dynamics.cli import demo
+
+    assert demo.main(["--param", "qos_depth=5000", "--out", "/nonexistent/never"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["demo: --param 'qos_depth=5000' is not NAME:=VALUE (e.g. qos_depth:=5000)"]

@@ -109,3 +109,18 @@ def test_deadline_zero_counts_nothing():
     d.check_input(10 * MS, 10 * MS)
     assert d.checked == 0 and d.values() == {"deadline_ms": "0 (not counted)"}
     assert "not counted" in d.summary()
+
+
+def test_how_far_behind_is_the_largest_live_wait_per_take():
+    """stream_node warns from it; a recorded stamp (not live) says nothing of the node, and
+    deadline_ms 0 (nothing counted) still measures it."""
+    for deadline_ms in (1.0, 0.0):
+        d = Deadlines(deadline_ms, REASONS_INPUT)
+        d.check_input(300 * MS, 100_000)
+        d.check_input(700 * MS, 100_000)
+        d.check_input(10**18, 100_000)  # a recorded stamp: not live
+        d.check_input(-5 * MS, 100_000)  # a stamp ahead of this clock: not live
+        assert d.take_behind() == 700 * MS
+        assert d.take_behind() == 0  # afresh
+        d.check_input(2 * MS, 0)
+        assert d.take_behind() == 2 * MS

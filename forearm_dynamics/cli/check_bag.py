@@ -43,7 +43,10 @@ The --json report (NRMSE values are fractions there: 0.01 = 1 %; times in ms or 
                lost, loss_pct (%), lost_stamps_ns (first 20), tail_grace_s, tail_left_out
                (joint_states of the last tail_grace_s, not judged), tail_answered,
                unmatched_torques, latency_ms {p50, p99, max}, latency_p99_ms_target,
-               latency_p99_ms_max (null = not gating), rate_hz, max_gap_ms {topic: value}
+               latency_p99_ms_max (null = not gating), rate_hz, max_gap_ms {topic: value},
+               lost_runs (runs of consecutive lost joint_states), behind_after_loss_ms (the
+               latest first answer after such a run, beyond the median latency: about the
+               node's queue length when it fell behind and DDS dropped samples; null if none)
   std_calibration  null without joint_torques_std, else {groups {group: {coverage, ratio,
                rmse_nm, rms_std_nm, n}}, samples, warming_up, unmatched, model_part,
                coverage_range, ratio_range} (offline/calibration.py)
@@ -133,6 +136,12 @@ def _known_movement(movement_id: int) -> bool:
     return True
 
 
+def _queue_depth(config: dict | None) -> int | None:
+    """The torque node's input queue (samples), as its config states it (older bags: None)."""
+    depth = ((config or {}).get("input") or {}).get("queue_depth")
+    return depth if isinstance(depth, int) and depth > 0 else None
+
+
 def _reference(path: Path | None) -> tuple[ReferenceTorques | None, str | None]:
     try:
         return (read_reference(path) if path else load_reference()), None
@@ -189,6 +198,7 @@ def to_json(report: CheckReport, bag_info, th: Thresholds, code: int) -> dict:
             "latency_p99_ms_target": th.latency_p99_ms_target,
             "latency_p99_ms_max": th.latency_p99_ms_max,
             "rate_hz": d.rate_hz, "max_gap_ms": d.max_gap_ms,
+            "lost_runs": d.lost_runs, "behind_after_loss_ms": d.behind_after_loss_ms,
         },
         "machine": {"cpus": report.load.cpus, "load_average_now": report.load.now,
                     "load_average_during_run": report.load.during_run},
@@ -316,7 +326,8 @@ def _regression(args: argparse.Namespace) -> int:
     return code
 
 
-def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> int:
+def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info,
+                config: dict | None) -> int:
     from ..offline import score
 
     if rec.joint_states is None or len(rec.joint_states) == 0:
@@ -325,7 +336,8 @@ def _markerless(args: argparse.Namespace, rec, choice, th: Thresholds, info) -> 
     if not info.complete:
         rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
                             f"{info.message_count} messages of its complete chunks")
-    report = score.analyse_markerless(rec, choice, th, cutoff_hz=args.cutoff)
+    report = score.analyse_markerless(rec, choice, th, cutoff_hz=args.cutoff,
+                                      queue_depth=_queue_depth(config))
     code = DATA if report.failures else OK
     print("\n".join(score.format_score(report, info)))
     if args.html is not None:
@@ -374,7 +386,7 @@ def run(args: argparse.Namespace) -> int:
     rec = read_recording(bag, choice.arm.joint_names)
     rec.warnings[:0] = config_warnings
     if not rec.markers:  # any recording (a subject's session): scored as one segment
-        return _markerless(args, rec, choice, th, info)
+        return _markerless(args, rec, choice, th, info, config)
     if args.cutoff is not None:
         raise ValueError("--cutoff sets the reference of a bag without movement markers; this "
                          "bag has markers (its reference is the movements' own torques)")
@@ -389,7 +401,7 @@ def run(args: argparse.Namespace) -> int:
         rec.warnings.insert(0, f"bag is truncated ({info.problem}); analysing the "
                             f"{info.message_count} messages of its complete chunks")
     ref, ref_problem = _reference(args.reference)
-    report = analyse(rec, choice, ref, th, ref_problem)
+    report = analyse(rec, choice, ref, th, ref_problem, queue_depth=_queue_depth(config))
     cal = score_calibration(rec, choice.arm, config)
     report.failures += gate(cal, args.std_coverage, args.std_ratio)
     code = DATA if report.failures else OK

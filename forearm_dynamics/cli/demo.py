@@ -45,7 +45,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("demo_out"))
     ap.add_argument("--movements", default="", help="comma-separated ids (default: all 65)")
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "73") or 73))
+    ap.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                    help="a torque_node parameter for this run (repeatable), e.g. qos_depth:=5000")
     args = ap.parse_args(argv)
+    bad = [x for x in args.param if ":=" not in x]
+    if bad:
+        return die(f"demo: --param {bad[0]!r} is not NAME:=VALUE (e.g. qos_depth:=5000)")
     try:
         lease = claim_domain(args.domain, "demo")  # held until this process exits
     except ValueError as exc:
@@ -65,7 +70,8 @@ def main(argv: list[str] | None = None) -> int:
         pub_args += ["-p", f"movements:={ids}"]
     t0 = time.monotonic()
     print(f"demo: ROS_DOMAIN_ID={args.domain}, loopback only; output in {out}")
-    children = [Child.script("torque_node", [], env, out / "logs"),
+    node_args = [a for x in args.param for a in ("-p", x)]
+    children = [Child.script("torque_node", node_args, env, out / "logs"),
                 Child.script("bag_recorder", ["-p", f"output:={bag}"], env, out / "logs")]
     try:
         if not wait_for_listeners(env, "joint_states", 2, timeout=30.0):

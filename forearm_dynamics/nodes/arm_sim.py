@@ -58,7 +58,7 @@ from ..simulation import ArmSimulator
 from ..version import package_version
 from .arm_sim_settings import SPECS, ArmSimSettings
 from .common import latched_qos, main_for, stream_qos
-from .diagnostics import _load_average_1min, diagnostic_array
+from .diagnostics import diagnostic_array, load_average_1min
 from .params import ParameterError, Params, init_node
 from .scheduling import RealtimeNode, realtime_request
 
@@ -317,7 +317,7 @@ class ArmSim(RealtimeNode, Node):
             **{f"refused.{k}": str(n) for k, n in self.refused.items()},
             "command_timeouts": str(self.timeouts), "steps_skipped": str(self.skipped),
             "steps_diverged": str(self.diverged),
-            "load_average_1min": _load_average_1min(),
+            "load_average_1min": load_average_1min(),
             **self.realtime_values(),
         }
         level, message = DiagnosticStatus.OK, "running"

@@ -91,7 +91,7 @@ class PipelineStats:
             **{f"rejected.{k}": str(v) for k, v in self.rejected.items()},
             **{f"reset.{k}": str(v) for k, v in self.resets.items()},
             # the machine, not the node: latency on a loaded machine is read against it
-            "load_average_1min": _load_average_1min(),
+            "load_average_1min": load_average_1min(),
         }
         if new_rejected:
             level, message = DiagnosticStatus.WARN, f"{new_rejected} sample(s) rejected"
@@ -113,7 +113,7 @@ class PipelineStats:
         )
 
 
-def _load_average_1min() -> str:
+def load_average_1min() -> str:
     try:
         return f"{os.getloadavg()[0]:.2f}"
     except OSError:  # not every platform has it

@@ -56,13 +56,14 @@ from ..estimation.stamps import (
 from ..gcwatch import GcWatch
 from . import validation as v
 from .common import CONFIG_TOPIC, EXECUTORS, MATCH_POLL_S, MatchLog, stream_qos
-from .diagnostics import PipelineStats, diagnostic_array
+from .diagnostics import PipelineStats, diagnostic_array, load_average_1min
 from .input_plans import GENERIC, InputPlan, InputPlans
 from .params import Params, Spec, init_node
 from .scheduling import REALTIME_SPECS, RealtimeNode, realtime_request
 from .std_output import PerFrame
 
 WARN_EVERY_S = 1.0  # rate limit of the rejection warning, per reason
+BEHIND_WARN_EVERY_S = 10.0  # rate limit of the falling-behind warning
 #: s between looks at how many subscriptions the output's writer has matched (logged when
 #: it changes; get_subscription_count costs ~2 µs)
 _perf_ns, _time_ns = time.perf_counter_ns, time.time_ns
@@ -180,6 +181,7 @@ class JointStreamNode(RealtimeNode, Node):
         self._plan: InputPlan = GENERIC  # the last message's (the steady state: one shape)
         self._stamp = STAMP.unpack_from
         self._last_t_ns: int | None = None
+        self._rate_mark: tuple[int, int | None] = (0, None)  # received, last stamp: _warn_if_behind
         self.stamp_rule = StampRule(self.settings.max_stamp_gap)  # the jump rule
         self._max_gap_ns = self.stamp_rule.fast_ns  # steps up to this always continue
         self._step_pending = True  # on_first_step not called yet
@@ -464,11 +466,36 @@ class JointStreamNode(RealtimeNode, Node):
 
     def _publish_diagnostics(self) -> None:
         v.flush_suppressed(self._warned, self.get_logger(), WARN_EVERY_S)
+        self._warn_if_behind()
         status = self.stats.status(f"{self.get_name()}: pipeline", self.get_fully_qualified_name())
         values = {**self.diagnostic_values(status), **self.timing_values()}
         status.values.extend(KeyValue(key=k, value=x) for k, x in values.items())
         self.diag_pub.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
         self.after_diagnostics()
+
+    def _warn_if_behind(self) -> None:
+        """Past its queue (qos_depth samples) DDS drops the oldest input samples, and no event
+        tells this node (docs/reliability.md, known limits): say so while the node is more
+        than half a queue behind its live stamps (a starved machine: beside a dd + fsync loop
+        the demo's node fell up to 1.4 s behind and lost samples; benchmarks/pipeline_disk_load).
+        The queue in seconds is at the stream's rate over the period (samples per second of
+        stamps), not its last step: a publisher catching up stamps a burst microseconds apart."""
+        behind = self.deadlines.take_behind() / 1e9
+        mark = (self.stats.received, self._last_t_ns)
+        (n0, t0), self._rate_mark = self._rate_mark, mark
+        if not (t0 and mark[1] and mark[1] > t0 and mark[0] > n0):
+            return  # no stamps this period, or a restart (a jump back)
+        rate = (mark[0] - n0) / ((mark[1] - t0) * 1e-9)
+        queue_s = self.settings.qos_depth / rate
+        if behind < 0.5 * queue_s:
+            return
+        self.get_logger().warning(
+            f"{behind:.2f} s behind the input's stamps, past half of what the input queue holds "
+            f"({self.settings.qos_depth} samples = {queue_s:.2f} s at {rate:.0f} Hz): beyond "
+            "it DDS drops the oldest samples, which this node cannot count; the machine is not "
+            f"giving it the CPU it needs (load average {load_average_1min()}): free it, or "
+            "raise qos_depth (every sample kept, answered later)",
+            throttle_duration_sec=BEHIND_WARN_EVERY_S)
 
     def timing_values(self) -> dict[str, str]:
         """Deadline, real-time and garbage-collection key-values for /diagnostics."""

@@ -43,7 +43,8 @@ class TorqueStatus:
 
     def _input_config(self) -> dict:
         out = {"missing_joints": self.missing_joints,
-               "held_joints": list(getattr(self, "held_joints", ()))}
+               "held_joints": list(getattr(self, "held_joints", ())),
+               "queue_depth": self.settings.qos_depth}  # check_bag: was a loss an overflow?
         if self._hold_posture is not None:
             out["hold_posture"] = dict(zip(self.live.in_use.arm.joint_names if hasattr(self, "live")
                                            else (), self._hold_posture.tolist(), strict=False))

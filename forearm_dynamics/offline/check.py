@@ -45,7 +45,7 @@ from ..filtering import analysis_config, lowpass
 from ..model_config import ModelChoice
 from ..movements import get_movement
 from ..reference import ReferenceTorques
-from .delivery import Delivery, MachineLoad, delivery
+from .delivery import Delivery, MachineLoad, delivery, overflow_note
 from .recording import Marker, Recording
 from .thresholds import Thresholds
 
@@ -103,6 +103,7 @@ class CheckReport:
     warnings: list[str]
     failures: list[str] = field(default_factory=list)
     load: MachineLoad = field(default_factory=MachineLoad)
+    queue_depth: int | None = None  # the torque node's input queue (its config), if it says
 
 
 def _window(torques: JointSeries, t0_ns: int, window_ns: int) -> np.ndarray:
@@ -301,7 +302,7 @@ def _model_error(results: list[MovementResult], torques: JointSeries, ref: Refer
 
 
 def analyse(rec: Recording, choice: ModelChoice, ref: ReferenceTorques | None, th: Thresholds,
-            ref_problem: str | None = None) -> CheckReport:
+            ref_problem: str | None = None, queue_depth: int | None = None) -> CheckReport:
     """All three measures and the threshold verdicts (report.failures)."""
     arm, names = choice.arm, choice.arm.joint_names
     warnings = list(rec.warnings) + list(choice.warnings)
@@ -338,7 +339,7 @@ def analyse(rec: Recording, choice: ModelChoice, ref: ReferenceTorques | None, t
         groups = _model_error(results, torques, ref, choice.percentile, names, th)
     report = CheckReport(choice, names, results, groups,
                          delivery(rec.joint_states, torques, th.tail_grace_s), warnings,
-                         load=MachineLoad.measure(rec.load_average))
+                         load=MachineLoad.measure(rec.load_average), queue_depth=queue_depth)
     report.failures = verdicts(report, th)
     return report
 
@@ -385,8 +386,9 @@ def verdicts(report: CheckReport, th: Thresholds) -> list[str]:
     if d.lost > th.loss_max:
         where = ", ".join(stamp_text(s, report.movements) for s in d.lost_stamps_ns[:5])
         more = f" and {d.lost - 5} more" if d.lost > 5 else ""
+        why = overflow_note(d, report.queue_depth, report.load)
         out.append(f"lost {d.lost} joint_states without joint_torques ({d.loss_pct:.3f} %; at most "
-                   f"{th.loss_max} allowed): stamp {where}{more}")
+                   f"{th.loss_max} allowed): stamp {where}{more}" + (f"; {why}" if why else ""))
     missing = [r for r in report.movements if r.inputs_missing]
     n_missing = sum(r.inputs_missing for r in missing)
     if n_missing > th.loss_max:

@@ -5,6 +5,15 @@ the bag's last tail_grace_s are left out and counted: their answers may have arr
 the recorder stopped); the one-way latency is the joint_torques' log (receive) time minus
 that stamp. Latency measures the machine as much as the code, so it travels with the load
 average it was measured under (MachineLoad).
+
+Why the answers after a run of lost ones are measured (behind_after_loss_ms): a node that
+falls further behind its input than its queue holds (qos_depth samples; 1 s at 1 kHz by
+default) loses the oldest samples to DDS, uncounted by the node, and the first answer after
+them is about a queue's length late (the demo beside a dd + fsync loop on 2 CPUs, with a /proc
+sampler also running: 2 370-4 371 samples lost in runs whose next answers came 1.1-1.2 s
+late; benchmarks/pipeline_disk_load.py). Lost answers with prompt answers next to them have
+another cause (a rejected sample, an answer lost on the way), so the lag tells the two apart
+(overflow_note).
 """
 
 from __future__ import annotations
@@ -32,6 +41,9 @@ class Delivery:
     latency_ms: dict[str, float] = field(default_factory=dict)
     rate_hz: dict[str, float] = field(default_factory=dict)
     max_gap_ms: dict[str, float] = field(default_factory=dict)
+    lost_runs: int = 0  # runs of consecutive lost joint_states (in stamp order)
+    # the latest first answer after a run, beyond the median latency (ms; NaN: none answered)
+    behind_after_loss_ms: float = float("nan")
 
 
 @dataclass
@@ -72,6 +84,11 @@ class MachineLoad:
         return max(vals) if vals else float("nan")
 
 
+#: without the node's queue depth, a lag after lost answers worth naming (s): far above the
+#: spread of a working pipeline's latency (p99 2.6 ms quiet, 415 ms beside a disk writer)
+LAG_NOTE_S = 0.5
+
+
 def _rate_and_gap(log_ns: np.ndarray) -> tuple[float, float]:
     if len(log_ns) < 2:
         return float("nan"), float("nan")
@@ -101,11 +118,57 @@ def delivery(states: JointSeries | None, torques: JointSeries, grace_s: float) -
         matched = np.isin(torques.stamp_ns, states.stamp_ns)
         d.unmatched_torques = int((~matched).sum())
         answered = torques.stamp_ns[matched], torques.log_ns[matched]
+        if d.lost:
+            _after_loss(d, np.sort(considered), torques)
     if len(answered[0]):
         lat = (answered[1] - answered[0]) / 1e6
         p50, p99 = np.percentile(lat, [50, 99])
         d.latency_ms = {"p50": float(p50), "p99": float(p99), "max": float(lat.max())}
+        if np.isfinite(d.behind_after_loss_ms):
+            d.behind_after_loss_ms = max(0.0, d.behind_after_loss_ms - float(p50))
     return d
+
+
+def _after_loss(d: Delivery, stamps: np.ndarray, torques: JointSeries) -> None:
+    """lost_runs, and the largest latency (ms, not yet less the median) of the first answered
+    joint_state after each run of lost ones (sorted stamps)."""
+    order = np.argsort(torques.stamp_ns, kind="stable")
+    t_stamp, t_log = torques.stamp_ns[order], torques.log_ns[order]
+    pos = np.searchsorted(t_stamp, stamps)
+    hit = pos < len(t_stamp)
+    hit[hit] = t_stamp[pos[hit]] == stamps[hit]
+    lost = ~hit
+    starts = np.flatnonzero(lost & ~np.concatenate(([False], lost[:-1])))
+    d.lost_runs = len(starts)
+    answered = np.flatnonzero(hit)
+    nxt = np.searchsorted(answered, starts)  # the first answered one after each run's start
+    nxt = answered[nxt[nxt < len(answered)]]
+    if len(nxt):
+        lat = (t_log[pos[nxt]] - stamps[nxt]) / 1e6
+        d.behind_after_loss_ms = float(lat.max())
+
+
+def overflow_note(d: Delivery, queue_depth: int | None, load: MachineLoad) -> str:
+    """Why answers were lost when their neighbours say the node was behind ("" otherwise): the
+    first answers after the lost runs came at least half the node's queue late (its config
+    states the queue; an older bag's does not, and then a lag of LAG_NOTE_S is told as is)."""
+    behind = d.behind_after_loss_ms / 1e3
+    rate = d.rate_hz.get("joint_states", float("nan"))
+    if not (d.lost and np.isfinite(behind)):
+        return ""
+    text = (f"the first answers after the {d.lost_runs} run(s) of lost ones came up to "
+            f"{behind:.2f} s later than usual")
+    if queue_depth is None or not (np.isfinite(rate) and rate > 0.0):
+        return f"{text} (the bag's config does not state the node's queue)" \
+            if behind >= LAG_NOTE_S else ""
+    queue_s = queue_depth / rate
+    if behind < 0.5 * queue_s:
+        return ""
+    return (f"{text}, about what the torque node's input queue holds ({queue_depth} samples = "
+            f"{queue_s:.2f} s at {rate:.0f} Hz): the node fell behind its input and DDS dropped "
+            f"the oldest samples; the machine did not give the nodes the CPU they need "
+            f"({load.describe()}): free it, or deepen the queue (torque_node qos_depth: every "
+            "sample kept, answered later)")
 
 
 def old_stamps_note(d: Delivery, old_stamps_latency_s: float) -> str | None:

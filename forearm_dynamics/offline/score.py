@@ -47,7 +47,7 @@ from ..estimation.offline import zero_phase
 from ..filtering import analysis_config, usable_cutoff
 from ..model_config import ModelChoice
 from ..ranges import check_recording
-from .delivery import Delivery, delivery, old_stamps_note
+from .delivery import Delivery, MachineLoad, delivery, old_stamps_note, overflow_note
 from .recording import Recording
 from .thresholds import Thresholds
 
@@ -79,6 +79,8 @@ class ScoreReport:
     peak_torque: np.ndarray | None = None  # (J,) N·m, largest |recorded torque|
     bound: np.ndarray | None = None  # (J,) N·m, the DOF group's human-speed bound
     bound_text: str = ""
+    queue_depth: int | None = None  # the torque node's input queue (its config), if it says
+    load: MachineLoad = field(default_factory=MachineLoad)
 
 
 def lag_by_xcorr(rec: np.ndarray, ref: np.ndarray, dt: float, max_lag_s: float = MAX_LAG_S) -> float:
@@ -104,7 +106,8 @@ def lag_by_xcorr(rec: np.ndarray, ref: np.ndarray, dt: float, max_lag_s: float =
 
 
 def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
-                       cutoff_hz: float | None = None) -> ScoreReport:
+                       cutoff_hz: float | None = None,
+                       queue_depth: int | None = None) -> ScoreReport:
     arm, names = choice.arm, choice.arm.joint_names
     states, torques = rec.joint_states, rec.joint_torques
     warnings = list(rec.warnings) + list(choice.warnings)
@@ -113,7 +116,8 @@ def analyse_markerless(rec: Recording, choice: ModelChoice, th: Thresholds,
     nan = np.full(len(names), np.nan)
     d = delivery(states, torques, th.tail_grace_s)
     report = ScoreReport(choice, names, 0, 0.0, cutoff, nan, nan, 0, nan, float("nan"), d, warnings,
-                         gate=th.markerless_nrmse_max)
+                         gate=th.markerless_nrmse_max, queue_depth=queue_depth,
+                         load=MachineLoad.measure(rec.load_average))
     # reference at the joint_states stamps (ordered, unique, complete positions)
     order = np.argsort(states.stamp_ns, kind="stable")
     s_t, s_q = states.stamp_ns[order], states.position[order]
@@ -243,8 +247,9 @@ def _verdicts(report: ScoreReport, th: Thresholds) -> list[str]:
                    + advice())
     d = report.delivery
     if d.lost > th.loss_max:
+        why = overflow_note(d, report.queue_depth, report.load)
         out.append(f"lost {d.lost} joint_states without joint_torques ({d.loss_pct:.2f} %) "
-                   f"> {th.loss_max}")
+                   f"> {th.loss_max}" + (f"; {why}" if why else ""))
     bad = [n for n, e in zip(report.joint_names, report.rmse, strict=True) if e == np.inf]
     if bad:
         out.append(f"joint_torques effort not finite (or missing) for {', '.join(bad[:4])}")
@@ -312,7 +317,9 @@ def score_dict(report: ScoreReport) -> dict:
         "lag_median_ms": clean(report.lag_median_ms), "left_out": report.left_out,
         "delivery": {"joint_states": d.joint_states, "joint_torques": d.joint_torques,
                      "considered": d.considered, "lost": d.lost, "loss_pct": clean(d.loss_pct),
-                     "latency_ms": d.latency_ms, "rate_hz": d.rate_hz},
+                     "latency_ms": d.latency_ms, "rate_hz": d.rate_hz,
+                     "lost_runs": d.lost_runs,
+                     "behind_after_loss_ms": clean(d.behind_after_loss_ms)},
         "warnings": report.warnings, "failures": report.failures, "notes": report.notes,
         "nrmse_gate": report.gate,
         "units": report.units,
