@@ -6,19 +6,17 @@ from __future__ import annotations
 
 import copy
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
+from benchmarks import estimator_headroom as headroom
+from benchmarks.corpus import half_of, load
+
 pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
-from benchmarks import estimator_headroom as headroom  # noqa: E402
-from benchmarks.corpus import half_of, load  # noqa: E402
 
 
 def test_the_oracles_are_never_worse_than_what_they_choose_from() -> None:

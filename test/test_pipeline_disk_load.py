@@ -6,18 +6,15 @@ from __future__ import annotations
 
 import copy
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
+from benchmarks import pipeline_disk_load as bench
+
 pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from benchmarks import pipeline_disk_load as bench  # noqa: E402
 
 RESULT = ROOT / "benchmarks" / "pipeline_disk_load.json"
 

@@ -5,18 +5,15 @@ from __future__ import annotations
 
 import copy
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
+from benchmarks import recorder_disk_stall as bench
+
 pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from benchmarks import recorder_disk_stall as bench  # noqa: E402
 
 RESULT = ROOT / "benchmarks" / "recorder_disk_stall.json"
 
