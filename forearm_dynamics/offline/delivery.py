@@ -119,7 +119,7 @@ def delivery(states: JointSeries | None, torques: JointSeries, grace_s: float) -
         d.unmatched_torques = int((~matched).sum())
         answered = torques.stamp_ns[matched], torques.log_ns[matched]
         if d.lost:
-            _after_loss(d, np.sort(considered), torques)
+            _after_loss(d, considered, lost, torques)
     if len(answered[0]):
         lat = (answered[1] - answered[0]) / 1e6
         p50, p99 = np.percentile(lat, [50, 99])
@@ -129,22 +129,20 @@ def delivery(states: JointSeries | None, torques: JointSeries, grace_s: float) -
     return d
 
 
-def _after_loss(d: Delivery, stamps: np.ndarray, torques: JointSeries) -> None:
+def _after_loss(d: Delivery, stamps: np.ndarray, lost: np.ndarray, torques: JointSeries) -> None:
     """lost_runs, and the largest latency (ms, not yet less the median) of the first answered
-    joint_state after each run of lost ones (sorted stamps)."""
-    order = np.argsort(torques.stamp_ns, kind="stable")
-    t_stamp, t_log = torques.stamp_ns[order], torques.log_ns[order]
-    pos = np.searchsorted(t_stamp, stamps)
-    hit = pos < len(t_stamp)
-    hit[hit] = t_stamp[pos[hit]] == stamps[hit]
-    lost = ~hit
+    joint_state after each run of lost ones (runs in stamp order; `lost` as delivery() found)."""
+    order = np.argsort(stamps, kind="stable")
+    stamps, lost = stamps[order], lost[order]
     starts = np.flatnonzero(lost & ~np.concatenate(([False], lost[:-1])))
     d.lost_runs = len(starts)
-    answered = np.flatnonzero(hit)
+    answered = np.flatnonzero(~lost)
     nxt = np.searchsorted(answered, starts)  # the first answered one after each run's start
     nxt = answered[nxt[nxt < len(answered)]]
     if len(nxt):
-        lat = (t_log[pos[nxt]] - stamps[nxt]) / 1e6
+        t = np.argsort(torques.stamp_ns, kind="stable")
+        pos = t[np.searchsorted(torques.stamp_ns[t], stamps[nxt])]
+        lat = (torques.log_ns[pos] - stamps[nxt]) / 1e6
         d.behind_after_loss_ms = float(lat.max())
 
 
